@@ -1,0 +1,58 @@
+"""Taichi runtime set-up: architecture and precision are settings, never hard-coded."""
+
+from __future__ import annotations
+
+import os
+
+import taichi as ti
+
+_STATE: dict[str, object] = {}
+
+ARCHS = ("auto", "cpu", "cuda")
+PRECISIONS = ("f32", "f64")
+
+
+def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None) -> None:
+    """Initialise Taichi once per (arch, precision); re-initialise only when they change.
+
+    ``arch``: ``cpu`` (default), ``cuda`` or ``auto`` (GPU when available). ``precision``: the
+    floating-point type of every kernel and array (``f64`` is used by the gradient checks).
+    ``threads`` defaults to ``DBTOOL_THREADS`` or the CPU count.
+    """
+    if arch not in ARCHS:
+        raise ValueError(f"unknown arch {arch!r}; choose one of {', '.join(ARCHS)}")
+    if precision not in PRECISIONS:
+        raise ValueError(f"unknown precision {precision!r}; choose one of {', '.join(PRECISIONS)}")
+    key = (arch, precision)
+    if _STATE.get("key") == key:
+        return
+    if "key" in _STATE:
+        ti.reset()
+    n_threads = threads or int(os.environ.get("DBTOOL_THREADS", "0")) or os.cpu_count() or 1
+    ti_arch = {"cpu": ti.cpu, "cuda": ti.cuda, "auto": ti.gpu}[arch]
+    kwargs: dict[str, object] = {}
+    if arch == "cpu":
+        kwargs["cpu_max_num_threads"] = n_threads
+    ti.init(
+        arch=ti_arch,
+        default_fp=ti.f64 if precision == "f64" else ti.f32,
+        offline_cache=True,
+        log_level=os.environ.get("TI_LOG_LEVEL", "warn"),
+        **kwargs,
+    )
+    _STATE["key"] = key
+
+
+def dtype():
+    """The Taichi float type of the current runtime (``f32`` unless initialised otherwise)."""
+    if "key" not in _STATE:
+        init()
+    return ti.f64 if _STATE["key"][1] == "f64" else ti.f32
+
+
+def device() -> str:
+    """A short description of the runtime for run manifests."""
+    if "key" not in _STATE:
+        return "uninitialised"
+    arch, precision = _STATE["key"]
+    return f"taichi-{ti.lang.impl.current_cfg().arch.name}-{precision}"
