@@ -1,68 +1,64 @@
 """Taichi kernels of the MLS-MPM substep (SPEC section 3), named after the algorithm stages.
 
 Every kernel takes Taichi ndarrays, so it is compiled once per dtype and reused for any particle
-count and any grid size (sizes are runtime arguments, never compile-time constants).
+count, grid size or task (sizes are runtime arguments, never compile-time constants).
 
-State layout inside one control-step segment: ``x, v`` have shape ``(S + 1, N)`` (vectors),
-``C, F`` shape ``(S + 1, N)`` (3x3 matrices); the grid of every substep is kept,
-``grid_mv, grid_v`` with shape ``(S, NX, NY, NZ)`` (vectors) and ``grid_m`` ``(S, NX, NY, NZ)``,
-so the backward pass does not need to re-run P2G.
+A substep is ``stress -> p2g -> grid_op -> g2p``:
 
-Constitutive model (documented in docs/simulator.md): compressible neo-Hookean Kirchhoff stress
-``tau = mu (F F^T - I) + lam J (J - 1) I`` plus the muscle term ``-a k F A A^T F^T`` along the
-particle's actuator direction ``A`` (positive ``a`` extends the material along ``A``) with
-``k = act_strength * E_p``.
+* ``stress`` (Taichi autodiff): deformation-gradient update and the APIC affine matrix
+  ``A = -dt V0 (4/dx^2) phi tau + m C`` with the compressible neo-Hookean Kirchhoff stress
+  ``tau = mu (F F^T - I) + lam J (J - 1) I`` and the muscle term ``-a k F d d^T F^T`` along the
+  particle's actuator direction ``d`` (positive ``a`` extends the material along ``d``),
+  ``k = act_strength * E``.
+* ``p2g`` / ``g2p``: quadratic B-spline transfers. On the CPU the scatter runs in ``chunks``
+  contiguous particle ranges, one per thread, each into its own copy of the grid with plain
+  (non-atomic) adds; ``grid_op`` sums the copies. Their gradients are written by hand
+  (``*_grad`` kernels): autodiff of the 27-node stencils is slow to compile and emits atomics.
+* ``grid_op``: momentum to velocity, gravity, ground and box colliders with Coulomb friction,
+  domain walls. Works on the active region ``[lo, hi)`` of the grid only.
 """
-
 
 import taichi as ti
 
 MAX_GROUPS = 4  # actuator groups (control channels) per robot
 MAX_BOXES = 2  # static box colliders per scene
+BOUND = 3  # wall thickness in cells
 
-nd = ti.types.ndarray  # noqa: E731 (kernel annotations must not be strings)
+nd = ti.types.ndarray  # kernel annotations must not be strings: no postponed annotations here
 
 
 @ti.func
-def _bspline(fx):
-    """Quadratic B-spline weights for the 3 nodes around a particle (MLS-MPM)."""
-    return [0.5 * (1.5 - fx) ** 2, 0.75 - (fx - 1.0) ** 2, 0.5 * (fx - 0.5) ** 2]
+def _weights(fx):
+    """Quadratic B-spline weights and their derivatives for the 3 nodes around a particle."""
+    w = [0.5 * (1.5 - fx) ** 2, 0.75 - (fx - 1.0) ** 2, 0.5 * (fx - 0.5) ** 2]
+    dw = [fx - 1.5, -2.0 * (fx - 1.0), fx - 0.5]
+    return w, dw
 
 
+@ti.func
+def _base(xp, inv_dx, lo, hi):
+    """Lower stencil node of a particle, clamped to the active region (NaN-safe indexing)."""
+    base = ti.cast(xp * inv_dx - 0.5, ti.i32)
+    return ti.max(ti.min(base, hi - 3), lo)
+
+
+@ti.func
+def _range(c, chunks, n):
+    return c * n // chunks, (c + 1) * n // chunks
+
+
+# --------------------------------------------------------------------------- stress (autodiff)
 @ti.kernel
-def clear_grid(grid_mv: nd(), grid_m: nd(), s: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32):
-    for i, j, k in ti.ndrange(nx, ny, nz):
-        grid_mv[s, i, j, k] = ti.Vector([0.0, 0.0, 0.0])
-        grid_m[s, i, j, k] = 0.0
-
-
-@ti.kernel
-def clear_grid_grad(
-    gmv_g: nd(), gm_g: nd(), gv_g: nd(), s: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32
-):
-    for i, j, k in ti.ndrange(nx, ny, nz):
-        gmv_g[s, i, j, k] = ti.Vector([0.0, 0.0, 0.0])
-        gm_g[s, i, j, k] = 0.0
-        gv_g[s, i, j, k] = ti.Vector([0.0, 0.0, 0.0])
-
-
-@ti.kernel
-def p2g(
-    x: nd(), v: nd(), C: nd(), F: nd(),
-    phi: nd(), E: nd(), wact: nd(), adir: nd(), act: nd(),
-    grid_mv: nd(), grid_m: nd(),
-    s: ti.i32, t: ti.i32, n: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
+def stress(
+    C: nd(), F: nd(), A: nd(), phi: nd(), E: nd(), wact: nd(), adir: nd(), act: nd(),
+    s: ti.i32, t: ti.i32, n: ti.i32,
     dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
 ):
-    """Particle-to-grid transfer with the deformation-gradient update (MLS-MPM, APIC)."""
+    """``F[s+1] = (I + dt C) F`` and the affine matrix ``A[s]`` of every particle."""
     for p in range(n):
         inv_dx = 1.0 / dx
-        xp = x[s, p] * inv_dx
-        base = ti.cast(xp - 0.5, ti.i32)
-        base = ti.max(ti.min(base, ti.Vector([nx - 3, ny - 3, nz - 3])), 0)
-        fx = xp - ti.cast(base, float)
-        w = _bspline(fx)
-        Fn = (ti.Matrix.identity(float, 3) + dt * C[s, p]) @ F[s, p]
+        eye = ti.Matrix.identity(float, 3)
+        Fn = (eye + dt * C[s, p]) @ F[s, p]
         F[s + 1, p] = Fn
         J = Fn.determinant()
         e = E[p]
@@ -71,32 +67,119 @@ def p2g(
         a = 0.0
         for g in ti.static(range(MAX_GROUPS)):
             a += wact[p, g] * act[t, g]
-        d = adir[p]
-        Fd = Fn @ d
-        tau = mu * (Fn @ Fn.transpose() - ti.Matrix.identity(float, 3))
-        tau += ti.Matrix.identity(float, 3) * (lam * J * (J - 1.0))
+        Fd = Fn @ adir[p]
+        tau = mu * (Fn @ Fn.transpose() - eye) + (lam * J * (J - 1.0)) * eye
         tau -= (a * act_strength * e) * Fd.outer_product(Fd)
         ph = phi[p]
-        mass = p_rho * p_vol * ph
-        affine = (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * tau + mass * C[s, p]
-        mv = mass * v[s, p]
+        A[s, p] = (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * tau + (p_rho * p_vol * ph) * C[s, p]
+
+
+# --------------------------------------------------------------------------- p2g
+@ti.func
+def _p2g_particle(
+    x: ti.template(), v: ti.template(), A: ti.template(), phi: ti.template(),
+    scratch: ti.template(), s, p, c, lo, hi, dx, m_unit, atomic: ti.template(),
+):
+    inv_dx = 1.0 / dx
+    xp = x[s, p]
+    base = _base(xp, inv_dx, lo, hi)
+    fx = xp * inv_dx - ti.cast(base, float)
+    w, _dw = _weights(fx)
+    m = m_unit * phi[p]
+    mv = m * v[s, p]
+    Ap = A[s, p]
+    for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+        off = ti.Vector([i, j, k])
+        wt = w[i][0] * w[j][1] * w[k][2]
+        mom = wt * (mv + Ap @ ((ti.cast(off, float) - fx) * dx))
+        val = ti.Vector([mom[0], mom[1], mom[2], wt * m])
+        I = base + off
+        if ti.static(atomic):
+            scratch[c, I[0], I[1], I[2]] += val
+        else:
+            scratch[c, I[0], I[1], I[2]] = scratch[c, I[0], I[1], I[2]] + val
+
+
+@ti.kernel
+def p2g(
+    x: nd(), v: nd(), A: nd(), phi: nd(), scratch: nd(), s: ti.i32, n: ti.i32, chunks: ti.i32,
+    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
+    dx: float, m_unit: float,
+):
+    """Scatter mass and APIC momentum; ``chunks`` particle ranges into separate grid copies."""
+    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+    ti.loop_config(block_dim=1)
+    for c in range(chunks):
+        a, b = _range(c, chunks, n)
+        for p in range(a, b):
+            _p2g_particle(x, v, A, phi, scratch, s, p, c, lo, hi, dx, m_unit, False)
+
+
+@ti.kernel
+def p2g_atomic(
+    x: nd(), v: nd(), A: nd(), phi: nd(), scratch: nd(), s: ti.i32, n: ti.i32,
+    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
+    dx: float, m_unit: float,
+):
+    """Massively parallel variant of :func:`p2g` (GPU): one grid copy, atomic adds."""
+    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+    for p in range(n):
+        _p2g_particle(x, v, A, phi, scratch, s, p, 0, lo, hi, dx, m_unit, True)
+
+
+@ti.kernel
+def p2g_grad(
+    x: nd(), v: nd(), A: nd(), phi: nd(), ggrid: nd(), xg: nd(), vg: nd(), Ag: nd(), phig: nd(),
+    s: ti.i32, n: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
+    dx: float, m_unit: float,
+):
+    """Adjoint of :func:`p2g`: gather node adjoints ``ggrid = (dL/d mv, dL/d m)``."""
+    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+    for p in range(n):
+        inv_dx = 1.0 / dx
+        xp = x[s, p]
+        base = _base(xp, inv_dx, lo, hi)
+        fx = xp * inv_dx - ti.cast(base, float)
+        w, dw = _weights(fx)
+        m = m_unit * phi[p]
+        vp = v[s, p]
+        Ap = A[s, p]
+        gx = ti.Vector([0.0, 0.0, 0.0])
+        gv = ti.Vector([0.0, 0.0, 0.0])
+        gA = ti.Matrix.zero(float, 3, 3)
+        gm = 0.0
         for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
             off = ti.Vector([i, j, k])
-            dpos = (ti.cast(off, float) - fx) * dx
+            I = base + off
+            gg = ggrid[I[0], I[1], I[2]]
+            g = ti.Vector([gg[0], gg[1], gg[2]])
             wt = w[i][0] * w[j][1] * w[k][2]
-            idx = base + off
-            grid_mv[s, idx[0], idx[1], idx[2]] += wt * (mv + affine @ dpos)
-            grid_m[s, idx[0], idx[1], idx[2]] += wt * mass
+            dwt = ti.Vector([
+                dw[i][0] * w[j][1] * w[k][2],
+                w[i][0] * dw[j][1] * w[k][2],
+                w[i][0] * w[j][1] * dw[k][2],
+            ])
+            dpos = (ti.cast(off, float) - fx) * dx
+            c = g.dot(m * vp + Ap @ dpos) + gg[3] * m
+            gx += (inv_dx * c) * dwt - wt * (Ap.transpose() @ g)
+            gv += (wt * m) * g
+            gA += wt * g.outer_product(dpos)
+            gm += wt * (g.dot(vp) + gg[3])
+        xg[s, p] = xg[s, p] + gx
+        vg[s, p] = gv
+        Ag[s, p] = gA
+        phig[p] = phig[p] + m_unit * gm
 
 
+# --------------------------------------------------------------------------- grid
 @ti.func
-def _friction(v, n, mu_f):
-    """Project out the inward normal velocity and apply Coulomb friction (SoftZoo ground)."""
-    vn = v.dot(n)
+def _friction(v, nrm, mu_f):
+    """Remove the inward normal velocity and apply Coulomb friction (SoftZoo ground)."""
+    vn = v.dot(nrm)
     out = v
     if vn < 0.0:
-        vt = v - vn * n
-        lt = ti.sqrt(vt.dot(vt) + 1e-20)
+        vt = v - vn * nrm
+        lt = ti.sqrt(vt.dot(vt) + 1e-30)
         if lt + mu_f * vn <= 0.0:
             out = ti.Vector([0.0, 0.0, 0.0])
         else:
@@ -104,86 +187,219 @@ def _friction(v, n, mu_f):
     return out
 
 
+@ti.func
+def _friction_vjp(v, nrm, mu_f, g):
+    """Vector-Jacobian product of :func:`_friction` at ``v`` with the output adjoint ``g``."""
+    vn = v.dot(nrm)
+    out = g
+    if vn < 0.0:
+        vt = v - vn * nrm
+        lt = ti.sqrt(vt.dot(vt) + 1e-30)
+        if lt + mu_f * vn <= 0.0:
+            out = ti.Vector([0.0, 0.0, 0.0])
+        else:
+            h = vt / lt
+            g_vt = g + (mu_f * vn / lt) * (g - h * h.dot(g))
+            g_vn = mu_f * h.dot(g)
+            out = g_vt - nrm * nrm.dot(g_vt) + nrm * g_vn
+    return out
+
+
+@ti.func
+def _box_normal(pos, boxes: ti.template(), b: ti.template()):
+    """Outward normal of the face of box ``b`` nearest to ``pos``; zero when outside/unused."""
+    c = ti.Vector([boxes[b, 0], boxes[b, 1], boxes[b, 2]])
+    h = ti.Vector([boxes[b, 3], boxes[b, 4], boxes[b, 5]])
+    q = pos - c
+    gap = h - ti.abs(q)
+    nrm = ti.Vector([0.0, 0.0, 0.0])
+    if h[0] > 0.0 and gap.min() >= 0.0:
+        if gap[0] <= gap[1] and gap[0] <= gap[2]:
+            nrm = ti.Vector([1.0, 0.0, 0.0]) * ti.math.sign(q[0])
+        elif gap[2] <= gap[1]:
+            nrm = ti.Vector([0.0, 0.0, 1.0]) * ti.math.sign(q[2])
+        else:
+            nrm = ti.Vector([0.0, 1.0, 0.0]) * ti.math.sign(q[1])
+    return nrm
+
+
+@ti.func
+def _wall_mask(I, v, dims):
+    """1 for velocity components kept by the domain walls, 0 for those removed."""
+    keep = ti.Vector([1.0, 1.0, 1.0])
+    for d in ti.static(range(3)):
+        if (I[d] < BOUND and v[d] < 0.0) or (I[d] > dims[d] - BOUND and v[d] > 0.0):
+            keep[d] = 0.0
+    return keep
+
+
+@ti.func
+def _colliders(pos, v, boxes: ti.template(), ground_y, mu_f):
+    """Ground then boxes; returns the velocities before each collider and the result."""
+    v0 = v
+    if pos[1] <= ground_y:
+        v = _friction(v, ti.Vector([0.0, 1.0, 0.0]), mu_f)
+    v1 = v
+    v = _friction(v, _box_normal(pos, boxes, 0), mu_f)
+    v2 = v
+    v = _friction(v, _box_normal(pos, boxes, 1), mu_f)
+    return v0, v1, v2, v
+
+
 @ti.kernel
 def grid_op(
-    grid_mv: nd(), grid_m: nd(), grid_v: nd(), boxes: nd(),
-    s: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
+    scratch: nd(), grid_m: nd(), grid_vin: nd(), grid_v: nd(), boxes: nd(),
+    s: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
+    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
     dx: float, dt: float, gravity: float, ground_y: float, mu_f: float,
 ):
-    """Grid update: momentum to velocity, gravity, ground and box colliders with friction, walls.
-
-    ``boxes[b] = (cx, cy, cz, hx, hy, hz)``; a box with ``hx <= 0`` is unused.
-    """
-    for i, j, k in ti.ndrange(nx, ny, nz):
-        bound = 3
-        m = grid_m[s, i, j, k]
-        vel = ti.Vector([0.0, 0.0, 0.0])
+    """Sum the p2g copies (and clear them), then velocity update and boundary conditions."""
+    for i, j, k in ti.ndrange((lx, hx), (ly, hy), (lz, hz)):
+        acc = ti.Vector([0.0, 0.0, 0.0, 0.0])
+        for c in range(chunks):
+            acc += scratch[c, i, j, k]
+            scratch[c, i, j, k] = ti.Vector([0.0, 0.0, 0.0, 0.0])
+        m = acc[3]
+        vin = ti.Vector([0.0, 0.0, 0.0])
+        vout = ti.Vector([0.0, 0.0, 0.0])
         if m > 0.0:
-            vel = grid_mv[s, i, j, k] / m
-            vel[1] -= dt * gravity
-            pos = ti.Vector([i, j, k]) * dx
-            if pos[1] <= ground_y:
-                vel = _friction(vel, ti.Vector([0.0, 1.0, 0.0]), mu_f)
-            for b in ti.static(range(MAX_BOXES)):
-                c = ti.Vector([boxes[b, 0], boxes[b, 1], boxes[b, 2]])
-                h = ti.Vector([boxes[b, 3], boxes[b, 4], boxes[b, 5]])
-                q = pos - c
-                inside = h[0] > 0.0
-                for d in ti.static(range(3)):
-                    if ti.abs(q[d]) > h[d]:
-                        inside = False
-                if inside:
-                    # outward normal of the nearest face
-                    gap = h - ti.abs(q)
-                    n = ti.Vector([0.0, 1.0, 0.0]) * ti.math.sign(q[1])
-                    if gap[0] <= gap[1] and gap[0] <= gap[2]:
-                        n = ti.Vector([1.0, 0.0, 0.0]) * ti.math.sign(q[0])
-                    elif gap[2] <= gap[1]:
-                        n = ti.Vector([0.0, 0.0, 1.0]) * ti.math.sign(q[2])
-                    vel = _friction(vel, n, mu_f)
-            if i < bound and vel[0] < 0.0:
-                vel[0] = 0.0
-            if i > nx - bound and vel[0] > 0.0:
-                vel[0] = 0.0
-            if j > ny - bound and vel[1] > 0.0:
-                vel[1] = 0.0
-            if j < bound and vel[1] < 0.0:
-                vel[1] = 0.0
-            if k < bound and vel[2] < 0.0:
-                vel[2] = 0.0
-            if k > nz - bound and vel[2] > 0.0:
-                vel[2] = 0.0
-        grid_v[s, i, j, k] = vel
+            vin = ti.Vector([acc[0], acc[1], acc[2]]) / m
+            vin[1] -= dt * gravity
+            I = ti.Vector([i, j, k])
+            _v0, _v1, _v2, v3 = _colliders(I * dx, vin, boxes, ground_y, mu_f)
+            vout = v3 * _wall_mask(I, v3, ti.Vector([nx, ny, nz]))
+        grid_m[s, i, j, k] = m
+        grid_vin[s, i, j, k] = vin
+        grid_v[s, i, j, k] = vout
 
 
 @ti.kernel
-def g2p(
-    x: nd(), v: nd(), C: nd(), grid_v: nd(), glued: nd(),
-    s: ti.i32, n: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32, dx: float, dt: float,
+def grid_op_grad(
+    gscratch: nd(), grid_m: nd(), grid_vin: nd(), ggrid: nd(), boxes: nd(),
+    s: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
+    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
+    dx: float, dt: float, gravity: float, ground_y: float, mu_f: float,
 ):
-    """Grid-to-particle transfer (APIC velocity and affine matrix), then advection."""
+    """Adjoint of :func:`grid_op`: ``ggrid = (dL/d mv, dL/d m)`` from the g2p adjoints."""
+    for i, j, k in ti.ndrange((lx, hx), (ly, hy), (lz, hz)):
+        g = ti.Vector([0.0, 0.0, 0.0])
+        for c in range(chunks):
+            g += gscratch[c, i, j, k]
+            gscratch[c, i, j, k] = ti.Vector([0.0, 0.0, 0.0])
+        m = grid_m[s, i, j, k]
+        out = ti.Vector([0.0, 0.0, 0.0, 0.0])
+        if m > 0.0:
+            vin = grid_vin[s, i, j, k]
+            I = ti.Vector([i, j, k])
+            pos = I * dx
+            v0, v1, v2, v3 = _colliders(pos, vin, boxes, ground_y, mu_f)
+            g = g * _wall_mask(I, v3, ti.Vector([nx, ny, nz]))
+            g = _friction_vjp(v2, _box_normal(pos, boxes, 1), mu_f, g)
+            g = _friction_vjp(v1, _box_normal(pos, boxes, 0), mu_f, g)
+            if pos[1] <= ground_y:
+                g = _friction_vjp(v0, ti.Vector([0.0, 1.0, 0.0]), mu_f, g)
+            # vin = mv / m - dt g e_y  =>  dL/dmv = g / m,  dL/dm = -g . (mv / m) / m
+            vm = vin + ti.Vector([0.0, dt * gravity, 0.0])
+            out = ti.Vector([g[0] / m, g[1] / m, g[2] / m, -g.dot(vm) / m])
+        ggrid[i, j, k] = out
+
+
+# --------------------------------------------------------------------------- g2p
+@ti.kernel
+def g2p(
+    x: nd(), v: nd(), C: nd(), grid_v: nd(), glued: nd(), s: ti.i32, n: ti.i32,
+    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, dt: float,
+):
+    """Gather APIC velocity and affine matrix, then advect (glued particles stay put)."""
+    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
     for p in range(n):
         inv_dx = 1.0 / dx
-        xp = x[s, p] * inv_dx
-        base = ti.cast(xp - 0.5, ti.i32)
-        base = ti.max(ti.min(base, ti.Vector([nx - 3, ny - 3, nz - 3])), 0)
-        fx = xp - ti.cast(base, float)
-        w = _bspline(fx)
+        xp = x[s, p]
+        base = _base(xp, inv_dx, lo, hi)
+        fx = xp * inv_dx - ti.cast(base, float)
+        w, _dw = _weights(fx)
         new_v = ti.Vector([0.0, 0.0, 0.0])
         new_C = ti.Matrix.zero(float, 3, 3)
         for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
             off = ti.Vector([i, j, k])
-            dpos = ti.cast(off, float) - fx
             gv = grid_v[s, base[0] + i, base[1] + j, base[2] + k]
             wt = w[i][0] * w[j][1] * w[k][2]
             new_v += wt * gv
-            new_C += (4.0 * inv_dx * wt) * gv.outer_product(dpos)
+            new_C += (4.0 * inv_dx * wt) * gv.outer_product(ti.cast(off, float) - fx)
         keep = 1.0 - glued[p]
         v[s + 1, p] = keep * new_v
         C[s + 1, p] = keep * new_C
-        x[s + 1, p] = x[s, p] + (keep * dt) * new_v
+        x[s + 1, p] = xp + (keep * dt) * new_v
 
 
+@ti.func
+def _g2p_grad_particle(
+    x: ti.template(), grid_v: ti.template(), glued: ti.template(), xg: ti.template(),
+    vg: ti.template(), Cg: ti.template(), gscratch: ti.template(), s, p, c, lo, hi, dx, dt,
+    atomic: ti.template(),
+):
+    inv_dx = 1.0 / dx
+    xp = x[s, p]
+    base = _base(xp, inv_dx, lo, hi)
+    fx = xp * inv_dx - ti.cast(base, float)
+    w, dw = _weights(fx)
+    keep = 1.0 - glued[p]
+    gx1 = xg[s + 1, p]
+    gnv = keep * (vg[s + 1, p] + dt * gx1)
+    gnC = keep * Cg[s + 1, p]
+    gfx = ti.Vector([0.0, 0.0, 0.0])
+    for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+        off = ti.Vector([i, j, k])
+        I = base + off
+        gv = grid_v[s, I[0], I[1], I[2]]
+        wt = w[i][0] * w[j][1] * w[k][2]
+        dwt = ti.Vector([
+            dw[i][0] * w[j][1] * w[k][2],
+            w[i][0] * dw[j][1] * w[k][2],
+            w[i][0] * w[j][1] * dw[k][2],
+        ])
+        u = ti.cast(off, float) - fx
+        Cu = gnC @ u
+        gfx += dwt * (gnv.dot(gv) + 4.0 * inv_dx * gv.dot(Cu))
+        gfx -= (4.0 * inv_dx * wt) * (gnC.transpose() @ gv)
+        val = wt * gnv + (4.0 * inv_dx * wt) * Cu
+        if ti.static(atomic):
+            gscratch[c, I[0], I[1], I[2]] += val
+        else:
+            gscratch[c, I[0], I[1], I[2]] = gscratch[c, I[0], I[1], I[2]] + val
+    xg[s, p] = gx1 + inv_dx * gfx
+
+
+@ti.kernel
+def g2p_grad(
+    x: nd(), grid_v: nd(), glued: nd(), xg: nd(), vg: nd(), Cg: nd(), gscratch: nd(),
+    s: ti.i32, n: ti.i32, chunks: ti.i32,
+    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, dt: float,
+):
+    """Adjoint of :func:`g2p`: particle adjoints at ``s`` and node velocity adjoints."""
+    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+    ti.loop_config(block_dim=1)
+    for c in range(chunks):
+        a, b = _range(c, chunks, n)
+        for p in range(a, b):
+            _g2p_grad_particle(x, grid_v, glued, xg, vg, Cg, gscratch, s, p, c, lo, hi, dx, dt,
+                               False)
+
+
+@ti.kernel
+def g2p_grad_atomic(
+    x: nd(), grid_v: nd(), glued: nd(), xg: nd(), vg: nd(), Cg: nd(), gscratch: nd(),
+    s: ti.i32, n: ti.i32,
+    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, dt: float,
+):
+    """Massively parallel variant of :func:`g2p_grad` (GPU): atomic adds into one copy."""
+    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+    for p in range(n):
+        _g2p_grad_particle(x, grid_v, glued, xg, vg, Cg, gscratch, s, p, 0, lo, hi, dx, dt,
+                           True)
+
+
+# --------------------------------------------------------------------------- bookkeeping
 @ti.kernel
 def copy_state(
     x: nd(), v: nd(), C: nd(), F: nd(), x2: nd(), v2: nd(), C2: nd(), F2: nd(),
@@ -198,33 +414,27 @@ def copy_state(
 
 
 @ti.kernel
-def health(x: nd(), v: nd(), s: ti.i32, n: ti.i32, lo: nd(), hi: nd(), vmax: float) -> ti.i32:
-    """Count particles that are NaN, left the domain or move faster than ``vmax``."""
-    bad = 0
-    for p in range(n):
-        xp = x[s, p]
-        vp = v[s, p]
-        ok = True
-        for d in ti.static(range(3)):
-            if not (xp[d] >= lo[d] and xp[d] <= hi[d]):
-                ok = False
-            if not (ti.abs(vp[d]) <= vmax):
-                ok = False
-        if not ok:
-            bad += 1
-    return bad
-
-
-@ti.kernel
 def copy_x(x: nd(), x2: nd(), src: ti.i32, dst: ti.i32, n: ti.i32):
     for p in range(n):
         x2[dst, p] = x[src, p]
 
 
 @ti.kernel
-def zero_state_grad(xg: nd(), vg: nd(), Cg: nd(), Fg: nd(), s: ti.i32, n: ti.i32):
+def zero_CF_grad(Cg: nd(), Fg: nd(), s: ti.i32, n: ti.i32):
     for p in range(n):
-        xg[s, p] = ti.Vector([0.0, 0.0, 0.0])
-        vg[s, p] = ti.Vector([0.0, 0.0, 0.0])
         Cg[s, p] = ti.Matrix.zero(float, 3, 3)
         Fg[s, p] = ti.Matrix.zero(float, 3, 3)
+
+
+@ti.kernel
+def bounds(x: nd(), s: ti.i32, n: ti.i32, out: nd(), vmax_out: nd(), v: nd()):
+    """Per-axis min / max particle position, the largest speed component, NaN count."""
+    for p in range(n):
+        xp = x[s, p]
+        vp = v[s, p]
+        for d in ti.static(range(3)):
+            ti.atomic_min(out[0, d], xp[d])
+            ti.atomic_max(out[1, d], xp[d])
+            ti.atomic_max(vmax_out[0], ti.abs(vp[d]))
+        if not (xp.norm_sqr() >= 0.0 and vp.norm_sqr() >= 0.0):
+            vmax_out[1] += 1.0

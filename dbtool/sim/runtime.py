@@ -41,6 +41,7 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None) 
         **kwargs,
     )
     _STATE["key"] = key
+    _STATE["threads"] = n_threads if arch == "cpu" else 1
 
 
 def dtype():
@@ -56,3 +57,17 @@ def device() -> str:
         return "uninitialised"
     arch, precision = _STATE["key"]
     return f"taichi-{ti.lang.impl.current_cfg().arch.name}-{precision}"
+
+
+def arch() -> str:
+    """``cpu`` or ``gpu``: which kernel variants the simulator uses."""
+    if "key" not in _STATE:
+        init()
+    return "cpu" if ti.lang.impl.current_cfg().arch == ti.x64 else "gpu"
+
+
+def threads() -> int:
+    """CPU threads Taichi runs on (the number of p2g grid copies)."""
+    if "key" not in _STATE:
+        init()
+    return int(_STATE["threads"])

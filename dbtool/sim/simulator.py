@@ -1,14 +1,20 @@
 """Differentiable MLS-MPM episode with per-control-step checkpointing (SPEC section 3).
 
 One :class:`Simulator` holds the arrays of one scene (particles + static colliders) and runs
-``n_steps`` control steps of ``substeps`` substeps each. The forward pass keeps only one state per
-control step (the checkpoint); the backward pass re-simulates one control step at a time, keeps
-that segment's substep states and grids, and runs the Taichi-autodiff gradient kernels in
-reverse. Memory therefore grows with ``n_steps + substeps`` states, not ``n_steps * substeps``.
+``n_steps`` control steps of ``substeps`` substeps each. The forward pass keeps one state per
+control step (the checkpoint). The backward pass re-simulates one control step at a time,
+keeping that segment's substep states and grids, then runs the adjoint kernels in reverse.
+Memory grows with ``n_steps + substeps`` particle states, not ``n_steps * substeps``.
+
+The grid is only touched inside an active region: the particles' bounding box at the start of
+each control step, padded by the stencil and by the largest distance a particle can travel in
+one control step. A particle that outruns the padding raises :class:`SimulationError`.
 """
 
 from __future__ import annotations
 
+import math
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,8 +32,9 @@ class SimulationError(RuntimeError):
 class Scene:
     """Static description of a simulation domain (units are the paper's: no physical meaning).
 
-    ``size`` is the domain extent (x, y = gravity axis, z); ``boxes`` are static colliders
-    ``(center, half_extent)``; the ground is the plane ``y = ground_y`` with Coulomb friction.
+    ``size`` is the domain extent (x, y = gravity axis, z), its origin at 0; ``boxes`` are static
+    colliders ``(center, half_extent)``; the ground is the plane ``y = ground_y`` with Coulomb
+    friction coefficient ``friction``.
     """
 
     size: tuple[float, float, float]
@@ -41,12 +48,16 @@ class Scene:
 
     @property
     def grid(self) -> tuple[int, int, int]:
-        return tuple(int(round(s / self.dx)) + 1 for s in self.size)  # type: ignore[return-value]
+        return tuple(int(math.ceil(s / self.dx)) + 1 for s in self.size)  # type: ignore
 
 
 @dataclass
 class Material:
-    """Material constants shared by every particle (per-particle stiffness ``E`` is separate)."""
+    """Constants shared by every particle (per-particle stiffness ``E`` is a field).
+
+    Defaults follow SoftZoo: Poisson ratio 0.2, density 1e3; ``act_strength`` scales the muscle
+    stress relative to the particle's ``E``; ``dt`` is the substep.
+    """
 
     nu: float = 0.2
     density: float = 1e3
@@ -85,7 +96,7 @@ class Particles:
             "adir": (n, 3), "glued": (n,), "v0": (n, 3),
         }
         for name, shape in shapes.items():
-            arr = getattr(self, name)
+            arr = np.asarray(getattr(self, name))
             if arr.shape != shape:
                 raise ValueError(f"particle field {name} has shape {arr.shape}, expected {shape}")
             if not np.all(np.isfinite(arr)):
@@ -112,68 +123,92 @@ class Simulator:
         self.n = particles.n
         self.dtype = runtime.dtype()
         self.np_dtype = np.float64 if self.dtype == ti.f64 else np.float32
-        self.nx, self.ny, self.nz = scene.grid
+        self.dims = scene.grid
         self.p_vol = (scene.dx * 0.5) ** 3
+        self.m_unit = self.mat.density * self.p_vol
+        self.atomic = runtime.arch() != "cpu"
+        self.chunks = 1 if self.atomic else max(1, runtime.threads())
+        lo = np.asarray(particles.x0).min(0)
+        hi = np.asarray(particles.x0).max(0)
+        if np.any(lo < K.BOUND * scene.dx) or np.any(hi > np.array(scene.size)
+                                                              - K.BOUND * scene.dx):
+            raise ValueError("particles start outside the simulation domain (or in its walls)")
+        self.regions: list[tuple[int, ...]] = []
         self._alloc()
         self._upload()
 
     # ----------------------------------------------------------------- arrays
     def _alloc(self) -> None:
         n, S, T, dt, g = self.n, self.substeps, self.n_steps, self.dtype, self.requires_grad
-        v3t, m3t = ti.types.vector(3, dt), ti.types.matrix(3, 3, dt)
+        v3, m3, v4 = ti.types.vector(3, dt), ti.types.matrix(3, 3, dt), ti.types.vector(4, dt)
 
-        def vec(_n, _dt, shape, needs_grad=False):
-            return ti.ndarray(v3t, shape, needs_grad=needs_grad)
+        def arr(kind, shape, grad=False):
+            return ti.ndarray(kind, shape, needs_grad=grad)
 
-        def mat(_r, _c, _dt, shape, needs_grad=False):
-            return ti.ndarray(m3t, shape, needs_grad=needs_grad)
-
-        self.x = vec(3, dt, shape=(S + 1, n), needs_grad=g)
-        self.v = vec(3, dt, shape=(S + 1, n), needs_grad=g)
-        self.C = mat(3, 3, dt, shape=(S + 1, n), needs_grad=g)
-        self.F = mat(3, 3, dt, shape=(S + 1, n), needs_grad=g)
+        self.x = arr(v3, (S + 1, n))
+        self.v = arr(v3, (S + 1, n))
+        self.C = arr(m3, (S + 1, n), g)
+        self.F = arr(m3, (S + 1, n), g)
+        self.A = arr(m3, (S, n), g)
         ck = T + 1 if g else 1
-        self.ck_x = vec(3, dt, shape=(T + 1, n))
-        self.ck_v = vec(3, dt, shape=(ck, n))
-        self.ck_C = mat(3, 3, dt, shape=(ck, n))
-        self.ck_F = mat(3, 3, dt, shape=(ck, n))
-        grid = (S, self.nx, self.ny, self.nz)
-        self.grid_mv = vec(3, dt, shape=grid, needs_grad=g)
-        self.grid_m = ti.ndarray(dt, shape=grid, needs_grad=g)
-        self.grid_v = vec(3, dt, shape=grid, needs_grad=g)
-        self.phi = ti.ndarray(dt, shape=(n,), needs_grad=g)
-        self.E = ti.ndarray(dt, shape=(n,), needs_grad=g)
-        self.wact = ti.ndarray(dt, shape=(n, K.MAX_GROUPS), needs_grad=g)
-        self.adir = vec(3, dt, shape=(n,))
-        self.glued = ti.ndarray(dt, shape=(n,))
-        self.act = ti.ndarray(dt, shape=(T, K.MAX_GROUPS), needs_grad=g)
-        self.boxes = ti.ndarray(dt, shape=(K.MAX_BOXES, 6))
-        self.lo = ti.ndarray(dt, shape=(3,))
-        self.hi = ti.ndarray(dt, shape=(3,))
+        self.ck_x = arr(v3, (T + 1, n))
+        self.ck_v, self.ck_C, self.ck_F = arr(v3, (ck, n)), arr(m3, (ck, n)), arr(m3, (ck, n))
+        gshape = (S, *self.dims)
+        self.scratch = arr(v4, (self.chunks, *self.dims))
+        self.scratch.fill(0)
+        self.grid_m = arr(dt, gshape)
+        self.grid_vin = arr(v3, gshape)
+        self.grid_v = arr(v3, gshape)
+        self.phi = arr(dt, (n,), g)
+        self.E = arr(dt, (n,), g)
+        self.wact = arr(dt, (n, K.MAX_GROUPS), g)
+        self.adir = arr(v3, (n,))
+        self.glued = arr(dt, (n,))
+        self.act = arr(dt, (T, K.MAX_GROUPS), g)
+        self.boxes = arr(dt, (K.MAX_BOXES, 6))
+        self.bbox = arr(dt, (2, 3))
+        self.stats = arr(dt, (2,))
+        if g:  # adjoints of quantities the hand-written kernels handle
+            self.xg, self.vg = arr(v3, (S + 1, n)), arr(v3, (S + 1, n))
+            self.gscratch = arr(v3, (self.chunks, *self.dims))
+            self.gscratch.fill(0)
+            self.ggrid = arr(v4, self.dims)
 
     def _upload(self) -> None:
         p, f = self.p, self.np_dtype
-        self.phi.from_numpy(p.phi.astype(f))
-        self.E.from_numpy(p.E.astype(f))
-        self.wact.from_numpy(p.wact.astype(f))
+        self.phi.from_numpy(np.asarray(p.phi, f))
+        self.E.from_numpy(np.asarray(p.E, f))
+        self.wact.from_numpy(np.asarray(p.wact, f))
         norm = np.linalg.norm(p.adir, axis=1, keepdims=True)
         self.adir.from_numpy((p.adir / np.maximum(norm, 1e-12)).astype(f))
-        self.glued.from_numpy(p.glued.astype(f))
-        boxes = np.zeros((K.MAX_BOXES, 6), f)
+        self.glued.from_numpy(np.asarray(p.glued, f))
         if len(self.scene.boxes) > K.MAX_BOXES:
             raise ValueError(f"at most {K.MAX_BOXES} box colliders per scene")
+        boxes = np.zeros((K.MAX_BOXES, 6), f)
         for b, (c, h) in enumerate(self.scene.boxes):
             boxes[b] = (*c, *h)
         self.boxes.from_numpy(boxes)
-        self.lo.from_numpy(np.zeros(3, f))
-        self.hi.from_numpy(np.array(self.scene.size, f))
 
     def set_particle_fields(self, phi=None, E=None, wact=None) -> None:
         """Replace occupancy, stiffness or actuator weights without re-allocating."""
-        for name, arr in (("phi", phi), ("E", E), ("wact", wact)):
-            if arr is not None:
-                setattr(self.p, name, np.asarray(arr))
-                getattr(self, name).from_numpy(np.asarray(arr, self.np_dtype))
+        for name, value in (("phi", phi), ("E", E), ("wact", wact)):
+            if value is not None:
+                setattr(self.p, name, np.asarray(value))
+                getattr(self, name).from_numpy(np.asarray(value, self.np_dtype))
+
+    def set_actions(self, actions: np.ndarray) -> None:
+        """Per-control-step actuation, shape ``(n_steps, groups <= MAX_GROUPS)``."""
+        actions = np.asarray(actions, dtype=float)
+        if actions.ndim != 2 or actions.shape[0] != self.n_steps \
+                or actions.shape[1] > K.MAX_GROUPS:
+            raise ValueError(
+                f"actions must have shape ({self.n_steps}, <= {K.MAX_GROUPS}), got {actions.shape}"
+            )
+        if not np.all(np.isfinite(actions)):
+            raise ValueError("actions contain NaN or inf")
+        full = np.zeros((self.n_steps, K.MAX_GROUPS), self.np_dtype)
+        full[:, : actions.shape[1]] = actions
+        self.act.from_numpy(full)
 
     # ----------------------------------------------------------------- stepping
     def _initial_state(self) -> None:
@@ -189,59 +224,77 @@ class Simulator:
         self.C.from_numpy(np.zeros((S + 1, n, 3, 3), f))
         self.F.from_numpy(F)
 
-    def _substep(self, s: int, t: int) -> None:
+    def _measure(self, s: int) -> tuple[np.ndarray, np.ndarray, float, int]:
+        big = np.finfo(self.np_dtype).max
+        self.bbox.from_numpy(np.array([[big] * 3, [-big] * 3], self.np_dtype))
+        self.stats.from_numpy(np.zeros(2, self.np_dtype))
+        K.bounds(self.x, s, self.n, self.bbox, self.stats, self.v)
+        bb, st = self.bbox.to_numpy(), self.stats.to_numpy()
+        return bb[0], bb[1], float(st[0]), int(st[1])
+
+    def _region(self, t: int) -> tuple[int, ...]:
+        """Active grid region for control step ``t`` from the state at substep 0."""
+        lo, hi, vmax, nan = self._measure(0)
+        if nan or not np.isfinite(vmax):
+            raise SimulationError(f"simulation blew up before control step {t + 1}: NaN state")
+        dx = self.scene.dx
+        reach = (2.0 * vmax + 1.0) * self.substeps * self.mat.dt / dx
+        pad = 3 + int(math.ceil(reach))
+        a = np.floor(lo / dx).astype(int) - pad
+        b = np.floor(hi / dx).astype(int) + pad + 1
+        a = np.maximum(a, 0)
+        b = np.minimum(b, np.array(self.dims))
+        return (*a.tolist(), *b.tolist())
+
+    def _substep(self, s: int, t: int, r: tuple[int, ...]) -> None:
         sc, m = self.scene, self.mat
-        K.clear_grid(self.grid_mv, self.grid_m, s, self.nx, self.ny, self.nz)
-        K.p2g(self.x, self.v, self.C, self.F, self.phi, self.E, self.wact, self.adir, self.act,
-              self.grid_mv, self.grid_m, s, t, self.n, self.nx, self.ny, self.nz,
-              sc.dx, m.dt, self.p_vol, m.density, m.nu, m.act_strength)
-        K.grid_op(self.grid_mv, self.grid_m, self.grid_v, self.boxes, s, self.nx, self.ny,
-                  self.nz, sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction)
-        K.g2p(self.x, self.v, self.C, self.grid_v, self.glued, s, self.n, self.nx, self.ny,
-              self.nz, sc.dx, m.dt)
+        K.stress(self.C, self.F, self.A, self.phi, self.E, self.wact, self.adir, self.act,
+                 s, t, self.n, sc.dx, m.dt, self.p_vol, m.density, m.nu, m.act_strength)
+        if self.atomic:
+            K.p2g_atomic(self.x, self.v, self.A, self.phi, self.scratch, s, self.n, *r, sc.dx,
+                         self.m_unit)
+        else:
+            K.p2g(self.x, self.v, self.A, self.phi, self.scratch, s, self.n, self.chunks, *r,
+                  sc.dx, self.m_unit)
+        K.grid_op(self.scratch, self.grid_m, self.grid_vin, self.grid_v, self.boxes, s,
+                  self.chunks, *self.dims, *r, sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction)
+        K.g2p(self.x, self.v, self.C, self.grid_v, self.glued, s, self.n, *r, sc.dx, m.dt)
 
     def _segment(self, t: int) -> None:
+        r = self.regions[t]
         for s in range(self.substeps):
-            self._substep(s, t)
+            self._substep(s, t, r)
 
     def _check(self, t: int) -> None:
-        bad = K.health(self.x, self.v, self.substeps, self.n, self.lo, self.hi, 50.0)
-        if bad:
+        lo, hi, vmax, nan = self._measure(self.substeps)
+        dx, r = self.scene.dx, self.regions[t]
+        inside = np.all(lo / dx - 0.5 >= np.array(r[:3])) and np.all(
+            hi / dx - 0.5 < np.array(r[3:]) - 2)
+        if nan or not np.isfinite(vmax) or not inside:
             raise SimulationError(
-                f"simulation blew up at control step {t + 1}: {bad} particle(s) NaN, "
-                "outside the domain or faster than 50 units/s"
+                f"simulation blew up at control step {t + 1}: NaN state or particles moved "
+                f"farther than the grid allows (max speed {vmax:.3g})"
             )
-
-    def set_actions(self, actions: np.ndarray) -> None:
-        actions = np.asarray(actions, dtype=float)
-        if actions.shape[0] != self.n_steps or actions.shape[1] > K.MAX_GROUPS:
-            raise ValueError(
-                f"actions must have shape ({self.n_steps}, <= {K.MAX_GROUPS}), got {actions.shape}"
-            )
-        full = np.zeros((self.n_steps, K.MAX_GROUPS), self.np_dtype)
-        full[:, : actions.shape[1]] = actions
-        self.act.from_numpy(full)
 
     def forward(self, actions: np.ndarray | None = None, progress=None) -> None:
         """Run the episode; keeps one checkpoint per control step (positions always)."""
         if actions is not None:
             self.set_actions(actions)
         self._initial_state()
-        S = self.substeps
-        full = self.requires_grad
+        S, n = self.substeps, self.n
+        self.regions = []
+        self._save(0, 0)
         for t in range(self.n_steps):
-            if t == 0:
-                self._save(0, 0, full)
+            self.regions.append(self._region(t))
             self._segment(t)
             self._check(t)
-            self._save(S, t + 1, full)
-            K.copy_state(self.x, self.v, self.C, self.F, self.x, self.v, self.C, self.F,
-                         S, 0, self.n)
+            self._save(S, t + 1)
+            K.copy_state(self.x, self.v, self.C, self.F, self.x, self.v, self.C, self.F, S, 0, n)
             if progress is not None:
                 progress(t + 1)
 
-    def _save(self, src: int, t: int, full: bool) -> None:
-        if full:
+    def _save(self, src: int, t: int) -> None:
+        if self.requires_grad:
             K.copy_state(self.x, self.v, self.C, self.F, self.ck_x, self.ck_v, self.ck_C,
                          self.ck_F, src, t, self.n)
         else:
@@ -253,50 +306,75 @@ class Simulator:
         return self.ck_x.to_numpy()
 
     def final_state(self) -> dict[str, np.ndarray]:
+        """Positions and velocities after the last control step."""
         return {"x": self.x.to_numpy()[0], "v": self.v.to_numpy()[0]}
 
     # ----------------------------------------------------------------- gradients
     def backward(self, grad_x: np.ndarray, grad_v: np.ndarray | None = None) -> dict:
-        """Reverse-mode gradients of a loss whose gradient w.r.t. the final ``x`` (and ``v``)
-        is given; returns d/d ``phi``, ``E``, ``wact``, ``actions``, ``x0`` and ``v0``."""
+        """Reverse pass for a loss whose gradient w.r.t. the final ``x`` (and ``v``) is given.
+
+        Returns d loss / d ``phi``, ``E``, ``wact``, ``actions``, ``x0`` and ``v0``.
+        """
         if not self.requires_grad:
             raise RuntimeError("this Simulator was built with requires_grad=False")
+        if len(self.regions) != self.n_steps:
+            raise RuntimeError("call forward() before backward()")
         S, n, f = self.substeps, self.n, self.np_dtype
-        for arr in (self.phi, self.E, self.wact, self.act):
-            arr.grad.fill(0)
-        gx = np.zeros((S + 1, n, 3), f)
-        gx[S] = grad_x
-        gv = np.zeros((S + 1, n, 3), f)
+        sc, m = self.scene, self.mat
+        for a in (self.phi, self.E, self.wact, self.act):
+            a.grad.fill(0)
+        seed_x = np.zeros((S + 1, n, 3), f)
+        seed_x[S] = grad_x
+        seed_v = np.zeros((S + 1, n, 3), f)
         if grad_v is not None:
-            gv[S] = grad_v
-        self.x.grad.from_numpy(gx)
-        self.v.grad.from_numpy(gv)
+            seed_v[S] = grad_v
+        self.xg.from_numpy(seed_x)
+        self.vg.from_numpy(seed_v)
         self.C.grad.fill(0)
         self.F.grad.fill(0)
-        sc, m = self.scene, self.mat
-        dims = (self.nx, self.ny, self.nz)
+        xg, vg, Cg, Fg = self.xg, self.vg, self.C.grad, self.F.grad
         for t in reversed(range(self.n_steps)):
+            r = self.regions[t]
             K.copy_state(self.ck_x, self.ck_v, self.ck_C, self.ck_F, self.x, self.v, self.C,
                          self.F, t, 0, n)
             self._segment(t)
             if t < self.n_steps - 1:
-                K.copy_state(self.x.grad, self.v.grad, self.C.grad, self.F.grad, self.x.grad,
-                             self.v.grad, self.C.grad, self.F.grad, 0, S, n)
+                K.copy_state(xg, vg, Cg, Fg, xg, vg, Cg, Fg, 0, S, n)
             for s in reversed(range(S)):
-                K.zero_state_grad(self.x.grad, self.v.grad, self.C.grad, self.F.grad, s, n)
-                K.clear_grid_grad(self.grid_mv.grad, self.grid_m.grad, self.grid_v.grad, s, *dims)
-                K.g2p.grad(self.x, self.v, self.C, self.grid_v, self.glued, s, n, *dims,
-                           sc.dx, m.dt)
-                K.grid_op.grad(self.grid_mv, self.grid_m, self.grid_v, self.boxes, s, *dims,
-                               sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction)
-                K.p2g.grad(self.x, self.v, self.C, self.F, self.phi, self.E, self.wact,
-                           self.adir, self.act, self.grid_mv, self.grid_m, s, t, n, *dims,
-                           sc.dx, m.dt, self.p_vol, m.density, m.nu, m.act_strength)
+                if self.atomic:
+                    K.g2p_grad_atomic(self.x, self.grid_v, self.glued, xg, vg, Cg, self.gscratch,
+                                      s, n, *r, sc.dx, m.dt)
+                else:
+                    K.g2p_grad(self.x, self.grid_v, self.glued, xg, vg, Cg, self.gscratch, s, n,
+                               self.chunks, *r, sc.dx, m.dt)
+                K.grid_op_grad(self.gscratch, self.grid_m, self.grid_vin, self.ggrid, self.boxes,
+                               s, self.chunks, *self.dims, *r, sc.dx, m.dt, sc.gravity,
+                               sc.ground_y, sc.friction)
+                K.p2g_grad(self.x, self.v, self.A, self.phi, self.ggrid, xg, vg, self.A.grad,
+                           self.phi.grad, s, n, *r, sc.dx, self.m_unit)
+                K.zero_CF_grad(Cg, Fg, s, n)
+                K.stress.grad(self.C, self.F, self.A, self.phi, self.E, self.wact, self.adir,
+                              self.act, s, t, n, sc.dx, m.dt, self.p_vol, m.density, m.nu,
+                              m.act_strength)
         return {
             "phi": self.phi.grad.to_numpy(),
             "E": self.E.grad.to_numpy(),
             "wact": self.wact.grad.to_numpy(),
             "actions": self.act.grad.to_numpy(),
-            "x0": self.x.grad.to_numpy()[0],
-            "v0": self.v.grad.to_numpy()[0],
+            "x0": xg.to_numpy()[0],
+            "v0": vg.to_numpy()[0],
         }
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process in MiB (Linux)."""
+    try:
+        with open(f"/proc/{os.getpid()}/status") as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
