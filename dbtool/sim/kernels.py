@@ -23,6 +23,10 @@ import taichi as ti
 MAX_GROUPS = 4  # actuator groups (control channels) per robot
 MAX_BOXES = 2  # static box colliders per scene
 BOUND = 3  # wall thickness in cells
+# Taichi's CPU scheduler hands a short range-for to one thread; spreading the ``chunks``
+# iterations over ``chunks * SPREAD`` indices (only every SPREAD-th does work) lets each chunk
+# land on its own thread. Every chunk is still processed by exactly one iteration.
+SPREAD = 4096
 
 nd = ti.types.ndarray  # kernel annotations must not be strings: no postponed annotations here
 
@@ -48,38 +52,56 @@ def _range(c, chunks, n):
 
 
 # --------------------------------------------------------------------------- stress (autodiff)
+@ti.func
+def _stress(
+    C: ti.template(), F: ti.template(), A: ti.template(), phi: ti.template(), E: ti.template(),
+    wact: ti.template(), adir: ti.template(), act: ti.template(), s, t, p,
+    dx, dt, p_vol, p_rho, nu, act_strength,
+):
+    """``F[s+1] = (I + dt C) F`` and the APIC affine matrix ``A[s]`` of particle ``p``."""
+    inv_dx = 1.0 / dx
+    eye = ti.Matrix.identity(float, 3)
+    Fn = (eye + dt * C[s, p]) @ F[s, p]
+    F[s + 1, p] = Fn
+    J = Fn.determinant()
+    e = E[p]
+    mu = e / (2.0 * (1.0 + nu))
+    lam = e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+    a = 0.0
+    for g in ti.static(range(MAX_GROUPS)):
+        a += wact[p, g] * act[t, g]
+    Fd = Fn @ adir[p]
+    tau = mu * (Fn @ Fn.transpose() - eye) + (lam * J * (J - 1.0)) * eye
+    tau -= (a * act_strength * e) * Fd.outer_product(Fd)
+    ph = phi[p]
+    Ap = (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * tau + (p_rho * p_vol * ph) * C[s, p]
+    A[s, p] = Ap
+    return Ap
+
+
 @ti.kernel
 def stress(
     C: nd(), F: nd(), A: nd(), phi: nd(), E: nd(), wact: nd(), adir: nd(), act: nd(),
     s: ti.i32, t: ti.i32, n: ti.i32,
     dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
 ):
-    """``F[s+1] = (I + dt C) F`` and the affine matrix ``A[s]`` of every particle."""
+    """Constitutive step alone; its Taichi-autodiff ``stress.grad`` is the backward pass."""
     for p in range(n):
-        inv_dx = 1.0 / dx
-        eye = ti.Matrix.identity(float, 3)
-        Fn = (eye + dt * C[s, p]) @ F[s, p]
-        F[s + 1, p] = Fn
-        J = Fn.determinant()
-        e = E[p]
-        mu = e / (2.0 * (1.0 + nu))
-        lam = e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
-        a = 0.0
-        for g in ti.static(range(MAX_GROUPS)):
-            a += wact[p, g] * act[t, g]
-        Fd = Fn @ adir[p]
-        tau = mu * (Fn @ Fn.transpose() - eye) + (lam * J * (J - 1.0)) * eye
-        tau -= (a * act_strength * e) * Fd.outer_product(Fd)
-        ph = phi[p]
-        A[s, p] = (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * tau + (p_rho * p_vol * ph) * C[s, p]
+        _stress(C, F, A, phi, E, wact, adir, act, s, t, p, dx, dt, p_vol, p_rho, nu,
+                act_strength)
 
 
 # --------------------------------------------------------------------------- p2g
 @ti.func
 def _p2g_particle(
-    x: ti.template(), v: ti.template(), A: ti.template(), phi: ti.template(),
-    scratch: ti.template(), s, p, c, lo, hi, dx, m_unit, atomic: ti.template(),
+    x: ti.template(), v: ti.template(), C: ti.template(), F: ti.template(), A: ti.template(),
+    phi: ti.template(), E: ti.template(), wact: ti.template(), adir: ti.template(),
+    act: ti.template(), scratch: ti.template(), s, t, p, c, lo, hi, dx, dt, p_vol, p_rho, nu,
+    act_strength, atomic: ti.template(),
 ):
+    Ap = _stress(C, F, A, phi, E, wact, adir, act, s, t, p, dx, dt, p_vol, p_rho, nu,
+                 act_strength)
+    m_unit = p_rho * p_vol
     inv_dx = 1.0 / dx
     xp = x[s, p]
     base = _base(xp, inv_dx, lo, hi)
@@ -87,7 +109,6 @@ def _p2g_particle(
     w, _dw = _weights(fx)
     m = m_unit * phi[p]
     mv = m * v[s, p]
-    Ap = A[s, p]
     for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
         off = ti.Vector([i, j, k])
         wt = w[i][0] * w[j][1] * w[k][2]
@@ -102,29 +123,36 @@ def _p2g_particle(
 
 @ti.kernel
 def p2g(
-    x: nd(), v: nd(), A: nd(), phi: nd(), scratch: nd(), s: ti.i32, n: ti.i32, chunks: ti.i32,
+    x: nd(), v: nd(), C: nd(), F: nd(), A: nd(), phi: nd(), E: nd(), wact: nd(), adir: nd(),
+    act: nd(), scratch: nd(), s: ti.i32, t: ti.i32, n: ti.i32, chunks: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
-    dx: float, m_unit: float,
+    dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
 ):
-    """Scatter mass and APIC momentum; ``chunks`` particle ranges into separate grid copies."""
+    """Stress, then scatter of mass and APIC momentum; ``chunks`` particle ranges go into
+    separate grid copies with plain adds (one range per CPU thread)."""
     lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
-    ti.loop_config(block_dim=1)
-    for c in range(chunks):
+    for q in range(chunks * SPREAD):
+        if q % SPREAD != 0:
+            continue
+        c = q // SPREAD
         a, b = _range(c, chunks, n)
         for p in range(a, b):
-            _p2g_particle(x, v, A, phi, scratch, s, p, c, lo, hi, dx, m_unit, False)
+            _p2g_particle(x, v, C, F, A, phi, E, wact, adir, act, scratch, s, t, p, c, lo, hi,
+                          dx, dt, p_vol, p_rho, nu, act_strength, False)
 
 
 @ti.kernel
 def p2g_atomic(
-    x: nd(), v: nd(), A: nd(), phi: nd(), scratch: nd(), s: ti.i32, n: ti.i32,
+    x: nd(), v: nd(), C: nd(), F: nd(), A: nd(), phi: nd(), E: nd(), wact: nd(), adir: nd(),
+    act: nd(), scratch: nd(), s: ti.i32, t: ti.i32, n: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
-    dx: float, m_unit: float,
+    dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
 ):
     """Massively parallel variant of :func:`p2g` (GPU): one grid copy, atomic adds."""
     lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
     for p in range(n):
-        _p2g_particle(x, v, A, phi, scratch, s, p, 0, lo, hi, dx, m_unit, True)
+        _p2g_particle(x, v, C, F, A, phi, E, wact, adir, act, scratch, s, t, p, 0, lo, hi,
+                      dx, dt, p_vol, p_rho, nu, act_strength, True)
 
 
 @ti.kernel
@@ -378,8 +406,10 @@ def g2p_grad(
 ):
     """Adjoint of :func:`g2p`: particle adjoints at ``s`` and node velocity adjoints."""
     lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
-    ti.loop_config(block_dim=1)
-    for c in range(chunks):
+    for q in range(chunks * SPREAD):
+        if q % SPREAD != 0:
+            continue
+        c = q // SPREAD
         a, b = _range(c, chunks, n)
         for p in range(a, b):
             _g2p_grad_particle(x, grid_v, glued, xg, vg, Cg, gscratch, s, p, c, lo, hi, dx, dt,

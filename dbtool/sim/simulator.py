@@ -232,11 +232,8 @@ class Simulator:
         bb, st = self.bbox.to_numpy(), self.stats.to_numpy()
         return bb[0], bb[1], float(st[0]), int(st[1])
 
-    def _region(self, t: int) -> tuple[int, ...]:
-        """Active grid region for control step ``t`` from the state at substep 0."""
-        lo, hi, vmax, nan = self._measure(0)
-        if nan or not np.isfinite(vmax):
-            raise SimulationError(f"simulation blew up before control step {t + 1}: NaN state")
+    def _region(self, lo: np.ndarray, hi: np.ndarray, vmax: float) -> tuple[int, ...]:
+        """Active grid region of a control step from the particles' bounds at its start."""
         dx = self.scene.dx
         reach = (2.0 * vmax + 1.0) * self.substeps * self.mat.dt / dx
         pad = 3 + int(math.ceil(reach))
@@ -248,14 +245,13 @@ class Simulator:
 
     def _substep(self, s: int, t: int, r: tuple[int, ...]) -> None:
         sc, m = self.scene, self.mat
-        K.stress(self.C, self.F, self.A, self.phi, self.E, self.wact, self.adir, self.act,
-                 s, t, self.n, sc.dx, m.dt, self.p_vol, m.density, m.nu, m.act_strength)
+        args = (self.x, self.v, self.C, self.F, self.A, self.phi, self.E, self.wact, self.adir,
+                self.act, self.scratch, s, t, self.n)
+        consts = (sc.dx, m.dt, self.p_vol, m.density, m.nu, m.act_strength)
         if self.atomic:
-            K.p2g_atomic(self.x, self.v, self.A, self.phi, self.scratch, s, self.n, *r, sc.dx,
-                         self.m_unit)
+            K.p2g_atomic(*args, *r, *consts)
         else:
-            K.p2g(self.x, self.v, self.A, self.phi, self.scratch, s, self.n, self.chunks, *r,
-                  sc.dx, self.m_unit)
+            K.p2g(*args, self.chunks, *r, *consts)
         K.grid_op(self.scratch, self.grid_m, self.grid_vin, self.grid_v, self.boxes, s,
                   self.chunks, *self.dims, *r, sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction)
         K.g2p(self.x, self.v, self.C, self.grid_v, self.glued, s, self.n, *r, sc.dx, m.dt)
@@ -265,7 +261,8 @@ class Simulator:
         for s in range(self.substeps):
             self._substep(s, t, r)
 
-    def _check(self, t: int) -> None:
+    def _check(self, t: int) -> tuple[np.ndarray, np.ndarray, float]:
+        """Fail loudly on NaN or on particles that outran the grid region; returns bounds."""
         lo, hi, vmax, nan = self._measure(self.substeps)
         dx, r = self.scene.dx, self.regions[t]
         inside = np.all(lo / dx - 0.5 >= np.array(r[:3])) and np.all(
@@ -275,6 +272,7 @@ class Simulator:
                 f"simulation blew up at control step {t + 1}: NaN state or particles moved "
                 f"farther than the grid allows (max speed {vmax:.3g})"
             )
+        return lo, hi, vmax
 
     def forward(self, actions: np.ndarray | None = None, progress=None) -> None:
         """Run the episode; keeps one checkpoint per control step (positions always)."""
@@ -284,10 +282,11 @@ class Simulator:
         S, n = self.substeps, self.n
         self.regions = []
         self._save(0, 0)
+        lo, hi, vmax, _ = self._measure(0)
         for t in range(self.n_steps):
-            self.regions.append(self._region(t))
+            self.regions.append(self._region(lo, hi, vmax))
             self._segment(t)
-            self._check(t)
+            lo, hi, vmax = self._check(t)
             self._save(S, t + 1)
             K.copy_state(self.x, self.v, self.C, self.F, self.x, self.v, self.C, self.F, S, 0, n)
             if progress is not None:
