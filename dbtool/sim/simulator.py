@@ -61,7 +61,7 @@ class Material:
 
     nu: float = 0.2
     density: float = 1e3
-    act_strength: float = 1.0
+    act_strength: float = 0.3
     dt: float = 1e-4
 
 

@@ -1,0 +1,60 @@
+"""Actuators from geometry (SPEC section 2): k-means on the robot's centred local coordinates."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def kmeans(points: np.ndarray, k: int, iters: int = 50) -> tuple[np.ndarray, np.ndarray]:
+    """Deterministic Lloyd k-means; seeds are quantiles along the widest axis.
+
+    Returns (labels, centroids).
+    """
+    if len(points) < k:
+        raise ValueError(f"cannot split {len(points)} particles into {k} actuator groups")
+    axis = int(np.argmax(np.ptp(points, axis=0)))
+    order = np.argsort(points[:, axis], kind="stable")
+    seeds = order[((np.arange(k) + 0.5) / k * len(points)).astype(int)]
+    cent = points[seeds].astype(float)
+    if k > 1 and points.shape[1] > 1:  # spread seeds over the plane for 2-D clustering
+        other = 1 - axis if points.shape[1] == 2 else (axis + 2) % points.shape[1]
+        ang = 2 * np.pi * (np.arange(k) + 0.5) / k
+        centre, spread = points.mean(0), points.std(0)
+        cent = np.tile(centre, (k, 1))
+        cent[:, axis] += spread[axis] * np.cos(ang)
+        cent[:, other] += spread[other] * np.sin(ang)
+    labels = np.zeros(len(points), int)
+    for _ in range(iters):
+        d = ((points[:, None, :] - cent[None]) ** 2).sum(-1)
+        new = d.argmin(1)
+        if np.array_equal(new, labels) and _ > 0:
+            break
+        labels = new
+        for j in range(k):
+            if np.any(labels == j):
+                cent[j] = points[labels == j].mean(0)
+    return labels, cent
+
+
+def cluster_actuators(
+    points: np.ndarray, active: np.ndarray, k: int, axes: tuple[int, ...], order_key
+) -> np.ndarray:
+    """One-hot actuator weights (N, k) from k-means of the active particles' coordinates
+    (centred on their mean) restricted to ``axes``; inactive particles join the nearest group.
+
+    ``order_key(centroid_xyz) -> float`` sorts the groups so that controllers address them by a
+    documented role (e.g. "nearer the obstacle first").
+    """
+    centre = points[active].mean(0)
+    local = (points - centre)[:, list(axes)]
+    labels, cent = kmeans(local[active], k)
+    full_cent = np.zeros((k, 3))
+    full_cent[:, list(axes)] = cent
+    rank = np.argsort([order_key(c) for c in full_cent], kind="stable")
+    d = ((local[:, None, :] - cent[None]) ** 2).sum(-1)
+    nearest = d.argmin(1)
+    remap = np.empty(k, int)
+    remap[rank] = np.arange(k)
+    w = np.zeros((len(points), k))
+    w[np.arange(len(points)), remap[nearest]] = 1.0
+    return w

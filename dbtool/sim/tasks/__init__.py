@@ -1,0 +1,26 @@
+"""The six tasks of the paper (SPEC section 3), by name."""
+
+from __future__ import annotations
+
+from dbtool.sim.tasks.balancing import Balancing
+from dbtool.sim.tasks.base import N_STEPS, SUBSTEPS, Episode, Task
+from dbtool.sim.tasks.box import MovingBox
+from dbtool.sim.tasks.crawling import Crawling
+from dbtool.sim.tasks.gripping import Gripping
+from dbtool.sim.tasks.hurdling import Hurdling
+from dbtool.sim.tasks.landing import Landing
+
+TASKS: dict[str, type[Task]] = {
+    t.name: t for t in (Balancing, Landing, Crawling, Hurdling, Gripping, MovingBox)
+}
+
+
+def get_task(name: str) -> Task:
+    """The task called ``name``; a clear error for an unknown one."""
+    try:
+        return TASKS[name]()
+    except KeyError:
+        raise ValueError(f"unknown task {name!r}; choose one of {', '.join(TASKS)}") from None
+
+
+__all__ = ["TASKS", "Episode", "N_STEPS", "SUBSTEPS", "Task", "get_task"]

@@ -1,0 +1,200 @@
+"""Common machinery of the six tasks (SPEC section 3): scene, placement, objects, metric."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from dbtool.sim.actuators import cluster_actuators
+from dbtool.sim.bodies import lattice, shape_occupancy
+from dbtool.sim.kernels import BOUND, MAX_GROUPS
+from dbtool.sim.robot import DEFAULT_STIFFNESS, Robot
+from dbtool.sim.simulator import Material, Particles, Scene
+
+DX = 0.005  # grid spacing: the 0.08 workspace spans 16 cells
+SPACING = DX / 2  # particle spacing: 8 particles per cell
+GROUND = BOUND * DX  # the ground plane sits on top of the bottom wall
+OBJECT_STIFFNESS = 1e5  # the cube / box is a stiff elastic body
+GRAVITY = (0.0, -1.0, 0.0)
+N_STEPS, SUBSTEPS = 100, 17  # every task: 100 control steps x 17 substeps
+
+
+@dataclass
+class Episode:
+    """A robot placed in a task scene: simulator particles plus the bookkeeping to map results
+    back to the design. ``design_index[i]`` is the robot particle that simulator particle ``i``
+    copies (-1 for the base, task objects and particles the task disables)."""
+
+    task: Task
+    scene: Scene
+    particles: Particles
+    design_index: np.ndarray
+    robot_mask: np.ndarray
+    object_mask: np.ndarray
+    info: dict = field(default_factory=dict)
+
+
+class Task:
+    """One of the paper's six tasks. Subclasses set the class attributes and override the
+    hooks (``scene``, ``origin``, ``controller``, ``metric``)."""
+
+    name = ""
+    title = ""
+    setup = ""
+    metric_text = ""
+    controller_text = ""
+    workspace: tuple[float, float, float] = (0.08, 0.08, 0.08)
+    n_groups = 0
+    cluster_axes: tuple[int, ...] = ()
+    direction: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    initial_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    metric_range: tuple[float, float] = (-np.inf, np.inf)  # sanity range used by the tests
+    material = Material()
+
+    # ------------------------------------------------------------------ hooks
+    def scene(self) -> Scene:
+        raise NotImplementedError
+
+    def origin(self) -> np.ndarray:
+        """World position of the workspace's min corner."""
+        raise NotImplementedError
+
+    def objects(self) -> list[tuple[np.ndarray, float]]:
+        """Dynamic cubes ``(centre, side)`` simulated as stiff MPM bodies."""
+        return []
+
+    def controller(self, n_steps: int = N_STEPS) -> np.ndarray:
+        """The prescribed open-loop actuation, shape ``(n_steps, n_groups)``."""
+        return np.zeros((n_steps, self.n_groups))
+
+    def metric(self, ep: Episode, x0: torch.Tensor, x: torch.Tensor, phi: torch.Tensor):
+        """Differentiable task metric (higher is better) from initial and final positions."""
+        raise NotImplementedError
+
+    def group_order(self, centroid: np.ndarray) -> float:
+        """Sort key of actuator groups (by centroid in centred local coordinates)."""
+        return float(centroid[self.cluster_axes[0]]) if self.cluster_axes else 0.0
+
+    # ------------------------------------------------------------------ robot
+    def design_points(self) -> np.ndarray:
+        """Particle lattice of the designed body (workspace coordinates)."""
+        return lattice(self.workspace, SPACING)
+
+    def design_workspace(self) -> tuple[float, float, float]:
+        return self.workspace
+
+    def make_robot(self, occupancy: np.ndarray, stiffness: np.ndarray | None = None,
+                   points: np.ndarray | None = None) -> Robot:
+        """A robot from geometry: stiffness (constant default) and clustered actuators."""
+        pts = self.design_points() if points is None else points
+        occ = np.asarray(occupancy, float)
+        stiff = np.full(len(pts), DEFAULT_STIFFNESS) if stiffness is None else stiffness
+        robot = Robot(pts, occ, np.asarray(stiff, float), np.zeros((len(pts), self.n_groups)),
+                      np.tile(self.direction, (self.n_groups, 1)).reshape(self.n_groups, 3))
+        if not np.any(robot.active()):
+            raise ValueError("the body is empty: no particle reaches the occupancy threshold")
+        if self.n_groups:
+            robot.actuators = cluster_actuators(pts, robot.active(), self.n_groups,
+                                                self.cluster_axes, self.group_order)
+        return robot
+
+    def reference_robot(self, shape: str = "box") -> Robot:
+        pts = self.design_points()
+        return self.make_robot(shape_occupancy(shape, pts, self.design_workspace()))
+
+    # ------------------------------------------------------------------ episode
+    def place(self, robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+        """World positions of the robot particles and their design indices."""
+        return robot.points + self.origin(), np.arange(robot.n)
+
+    def episode(self, robot: Robot) -> Episode:
+        """Assemble simulator particles: robot (placed), then task objects."""
+        robot.validate()
+        if robot.actuators.shape[1] != self.n_groups:
+            raise ValueError(f"task {self.name} needs {self.n_groups} actuator groups, "
+                             f"the robot has {robot.actuators.shape[1]}")
+        xr, idx = self.place(robot)
+        phi = robot.presence()[idx]
+        wact = np.zeros((len(idx), MAX_GROUPS))
+        wact[:, : self.n_groups] = robot.actuators[idx]
+        adir = robot.particle_directions()[idx] if self.n_groups else np.tile(
+            (0.0, 1.0, 0.0), (len(idx), 1))
+        stiff = robot.stiffness[idx]
+        glued = np.zeros(len(idx))
+        parts = [(xr, phi, stiff, wact, adir, glued, idx)]
+        extra = self.extra_particles(robot)
+        if extra is not None:
+            parts.append(extra)
+        n_robot = sum(len(p[0]) for p in parts)
+        for centre, side in self.objects():
+            xo = lattice((side, side, side), SPACING) + np.asarray(centre) - side / 2
+            m = len(xo)
+            parts.append((xo, np.ones(m), np.full(m, OBJECT_STIFFNESS), np.zeros((m, MAX_GROUPS)),
+                          np.tile((0.0, 1.0, 0.0), (m, 1)), np.zeros(m), np.full(m, -1)))
+        x0 = np.concatenate([p[0] for p in parts])
+        v0 = np.zeros_like(x0)
+        v0[:n_robot] = self.initial_velocity
+        particles = Particles(
+            x0=x0, phi=np.concatenate([p[1] for p in parts]),
+            E=np.concatenate([p[2] for p in parts]), wact=np.concatenate([p[3] for p in parts]),
+            adir=np.concatenate([p[4] for p in parts]),
+            glued=np.concatenate([p[5] for p in parts]), v0=v0,
+        )
+        design_index = np.concatenate([p[6] for p in parts]).astype(int)
+        robot_mask = np.zeros(len(x0), bool)
+        robot_mask[:n_robot] = True
+        ep = Episode(self, self.scene(), particles, design_index, robot_mask, ~robot_mask)
+        self.finish_episode(ep)
+        return ep
+
+    def extra_particles(self, robot: Robot):
+        """Non-designed robot parts (the gripper's glued base)."""
+        return None
+
+    def finish_episode(self, ep: Episode) -> None:
+        """Last task-specific adjustments (e.g. disable particles inside an object)."""
+
+    def describe(self) -> dict:
+        return {
+            "name": self.name, "title": self.title, "setup": self.setup,
+            "metric": self.metric_text, "controller": self.controller_text,
+            "workspace": self.workspace, "groups": self.n_groups,
+        }
+
+
+# ---------------------------------------------------------------------- metric helpers
+def centroid(x: torch.Tensor, w: torch.Tensor) -> torch.Tensor:
+    """Weighted centroid ``sum w x / sum w``."""
+    return (w[:, None] * x).sum(0) / w.sum().clamp_min(1e-12)
+
+
+def soft_occupancy(x: torch.Tensor, w: torch.Tensor, scene: Scene) -> torch.Tensor:
+    """Voxel occupancy on the simulation grid: trilinear splat of particle presence,
+    ``min(1, density / 4)`` (a full cell holds 8 particles; a surface node gets ~4)."""
+    dims = scene.grid
+    g = x / scene.dx
+    base = torch.floor(g).long()
+    f = g - base
+    occ = torch.zeros(dims[0] * dims[1] * dims[2], dtype=x.dtype)
+    for i in (0, 1):
+        for j in (0, 1):
+            for k in (0, 1):
+                wt = ((f[:, 0] if i else 1 - f[:, 0]) * (f[:, 1] if j else 1 - f[:, 1])
+                      * (f[:, 2] if k else 1 - f[:, 2]))
+                idx = base + torch.tensor([i, j, k])
+                for d in range(3):
+                    idx[:, d] = idx[:, d].clamp(0, dims[d] - 1)
+                flat = (idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]
+                occ = occ.index_add(0, flat, wt * w)
+    return (occ / 4.0).clamp(max=1.0)
+
+
+def soft_iou(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    return torch.minimum(a, b).sum() / torch.maximum(a, b).sum().clamp_min(1e-12)
+
+
+def ramp(start, end, frames: int) -> np.ndarray:
+    """Linear ramp over ``frames`` control steps (first frame = start, last = end)."""
+    return np.linspace(np.asarray(start, float), np.asarray(end, float), frames)

@@ -1,0 +1,1 @@
+"""Headless renders of rollouts (matplotlib, Agg backend)."""
