@@ -36,9 +36,9 @@ def _metric(task: Task, ep: Episode, x0: np.ndarray, x: np.ndarray, grad: bool):
     if not torch.isfinite(value):
         raise FloatingPointError(f"task {task.name}: the metric is not finite")
     if not grad:
-        return float(value), None, None
+        return value.item(), None, None
     value.backward()
-    return float(value), xt.grad.numpy(), phit.grad.numpy()
+    return value.item(), xt.grad.numpy(), phit.grad.numpy()
 
 
 def simulate(

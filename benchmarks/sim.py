@@ -1,0 +1,528 @@
+"""Speed, memory and JIT-compile benchmark of the differentiable MPM simulator.
+
+The workload is a solid cube of particles (lattice spacing 0.0025, grid ``dx`` 0.005) resting
+on the ground, split along x into two actuator groups driven by opposite-phase sine waves
+(amplitude 0.3). The loss is the mean x position of the particles after the episode, so the
+backward pass starts from ``d loss / d x = (1/N, 0, 0)``.
+
+Measured per size (about 5k, 20k and 80k particles: cube sides 17, 27 and 43), each size in
+its own subprocess:
+
+* forward particle-substeps per second: ``N * T * substeps / t_forward`` of a warm episode
+  without gradients (``requires_grad=False``);
+* forward+backward particle-substeps per second: ``N * T * substeps / (t_forward + t_backward)``
+  of a gradient episode (checkpointed forward, then backward with its re-simulation);
+* backward/forward ratio: ``t_backward / t_forward`` of that gradient episode;
+* peak memory (``VmHWM``) of one gradient episode of ``--mem-steps`` control steps (default 100,
+  the real episode length), run in a fresh subprocess per size; reported absolute and net of
+  the baseline after the imports and ``runtime.init``.
+
+Timed runs follow one warm-up episode; each number is the median of ``--repeats`` runs.
+
+JIT compile time is the first forward+backward of a tiny episode (T=2) minus an identical warm
+second run, in a fresh subprocess whose Taichi offline cache is an empty temporary directory
+(``TI_OFFLINE_CACHE_FILE_PATH``, which ``ti.init`` reads for its ``offline_cache_file_path``
+option) -> "cold"; then again in a second fresh subprocess with the now populated cache ->
+"warm cache".
+
+Prints a markdown table with the goals next to the numbers and writes the same numbers, with the
+machine description, to ``benchmarks/results/sim.json`` (``sim-quick.json`` with ``--quick``).
+
+Usage::
+
+    python benchmarks/sim.py                # full run, a few minutes on 2 cores
+    python benchmarks/sim.py --quick        # CI smoke test: 5k particles, T=5, 1 repeat
+    python benchmarks/sim.py --sizes 20000 --steps 10 --repeats 5 --out /tmp/sim.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_OUT = ROOT / "benchmarks" / "results" / "sim.json"
+QUICK_OUT = ROOT / "benchmarks" / "results" / "sim-quick.json"
+
+SPACING = 0.0025  # particle lattice spacing (half the grid dx)
+SUBSTEPS = 17
+E_MODULUS = 3e4
+AMPLITUDE = 0.3
+PERIOD = 10  # control steps per actuation period
+COMPILE_SIDE = 6  # tiny block of the compile-time episode
+COMPILE_STEPS = 2
+
+# Goals (SPEC) and the DiffTaichi diffmpm3d reference measured on this machine.
+GOAL_FWD_20K = 5e6  # particle-substeps / s, forward, 20k particles
+GOAL_BWD_RATIO = 3.0  # backward time / forward time
+GOAL_MEM_BYTES = 1.5e9  # peak memory of a 20k gradient episode, T=100
+GOAL_COLD_S = 60.0
+GOAL_WARM_S = 5.0
+GOAL_SIZE = 20000  # the size the speed and memory goals refer to
+REFERENCE = (
+    "DiffTaichi diffmpm3d on this machine: ~2.6 M forward, ~0.6 M fwd+bwd particle-substeps/s, "
+    "3 GB tape at 30k particles, ~4 min cold compile of the backward kernels"
+)
+MIB = 1024.0 * 1024.0
+R = TypeVar("R")
+
+
+# --------------------------------------------------------------------------- workload
+def side_for(n_target: int) -> int:
+    """Side of the cube lattice whose particle count is nearest ``n_target``."""
+    return max(2, round(n_target ** (1.0 / 3.0)))
+
+
+def make_block(side: int) -> tuple[Any, Any]:
+    """Scene and particles of a ``side**3`` cube resting on the ground, two actuator groups."""
+    from dbtool.sim.simulator import Particles, Scene
+
+    length = side * SPACING
+    scene = Scene(size=(length + 0.2, length + 0.06, length + 0.06))
+    axis = (np.arange(side) + 0.5) * SPACING
+    grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
+    x0 = grid + np.array([0.1, scene.ground_y, 0.03])
+    n = len(x0)
+    wact = np.zeros((n, 4))
+    front = grid[:, 0] >= length / 2
+    wact[front, 1] = 1.0
+    wact[~front, 0] = 1.0
+    particles = Particles(
+        x0=x0, phi=np.ones(n), E=np.full(n, E_MODULUS), wact=wact,
+        adir=np.tile((0.0, 1.0, 0.0), (n, 1)), glued=np.zeros(n), v0=np.zeros((n, 3)),
+    )
+    return scene, particles
+
+
+def make_actions(steps: int) -> np.ndarray:
+    """Opposite-phase sine waves for the two actuator groups, shape ``(steps, 2)``."""
+    phase = 2.0 * math.pi * np.arange(steps) / PERIOD
+    return AMPLITUDE * np.stack([np.sin(phase), np.sin(phase + math.pi)], axis=1)
+
+
+def loss_grad(n: int) -> np.ndarray:
+    """``d loss / d x_final`` of the loss ``mean(x_final[:, 0])``."""
+    g = np.zeros((n, 3))
+    g[:, 0] = 1.0 / n
+    return g
+
+
+def timed(fn: Callable[[], R]) -> tuple[float, R]:
+    """Wall-clock seconds of ``fn()`` (Taichi work included: synchronised) and its value."""
+    import taichi as ti
+
+    ti.sync()
+    start = time.perf_counter()
+    value = fn()
+    ti.sync()
+    return time.perf_counter() - start, value
+
+
+def check_grads(grads: dict[str, np.ndarray]) -> None:
+    for name, value in grads.items():
+        if not np.all(np.isfinite(value)):
+            raise RuntimeError(f"backward produced a non-finite gradient for {name}")
+
+
+# --------------------------------------------------------------------------- workers
+def _init(threads: int | None) -> float:
+    """Import the simulator and initialise Taichi; returns the seconds it took."""
+    start = time.perf_counter()
+    from dbtool.sim import runtime
+
+    runtime.init(arch="cpu", precision="f32", threads=threads)
+    return time.perf_counter() - start
+
+
+def worker_speed(side: int, steps: int, repeats: int, threads: int | None) -> dict[str, Any]:
+    """Forward-only and forward+backward timings of one block size."""
+    _init(threads)
+    from dbtool.sim import runtime
+    from dbtool.sim.simulator import Simulator
+
+    scene, particles = make_block(side)
+    n = particles.n
+    actions, grad_x = make_actions(steps), loss_grad(n)
+    work = n * steps * SUBSTEPS
+
+    def forward_only() -> list[float]:  # its arrays are freed on return
+        sim = Simulator(scene, particles, n_steps=steps, substeps=SUBSTEPS, requires_grad=False)
+        sim.forward(actions)  # warm-up (and JIT / cache load)
+        return [timed(lambda: sim.forward(actions))[0] for _ in range(repeats)]
+
+    t_fwd = forward_only()
+
+    gsim = Simulator(scene, particles, n_steps=steps, substeps=SUBSTEPS, requires_grad=True)
+    gsim.forward(actions)
+    check_grads(gsim.backward(grad_x))  # warm-up
+    t_gfwd: list[float] = []
+    t_bwd: list[float] = []
+    for _ in range(repeats):
+        t_gfwd.append(timed(lambda: gsim.forward(actions))[0])
+        seconds, grads = timed(lambda: gsim.backward(grad_x))
+        t_bwd.append(seconds)
+        check_grads(grads)
+
+    fwd, gfwd, bwd = (statistics.median(t) for t in (t_fwd, t_gfwd, t_bwd))
+    return {
+        "side": side, "particles": n, "steps": steps, "substeps": SUBSTEPS,
+        "repeats": repeats, "grid": list(scene.grid), "threads": runtime.threads(),
+        "device": runtime.device(),
+        "forward_s": t_fwd, "grad_forward_s": t_gfwd, "backward_s": t_bwd,
+        "forward_pss": work / fwd,
+        "grad_forward_pss": work / gfwd,
+        "fwd_bwd_pss": work / (gfwd + bwd),
+        "bwd_fwd_ratio": bwd / gfwd,
+    }
+
+
+def worker_memory(side: int, steps: int, threads: int | None) -> dict[str, Any]:
+    """Peak resident memory of one gradient episode (fresh process per size)."""
+    _init(threads)
+    from dbtool.sim.simulator import Simulator, peak_rss_mb
+
+    baseline = peak_rss_mb()
+    # Load every kernel on a tiny episode first, so "after JIT" separates code from arrays.
+    tscene, tparticles = make_block(4)
+    tiny = Simulator(tscene, tparticles, n_steps=2, substeps=SUBSTEPS, requires_grad=True)
+    tiny.forward(make_actions(2))
+    tiny.backward(loss_grad(tparticles.n))
+    del tiny
+    after_jit = peak_rss_mb()
+
+    scene, particles = make_block(side)
+    sim = Simulator(scene, particles, n_steps=steps, substeps=SUBSTEPS, requires_grad=True)
+    start = time.perf_counter()
+    sim.forward(make_actions(steps))
+    grads = sim.backward(loss_grad(particles.n))
+    episode_s = time.perf_counter() - start
+    check_grads(grads)
+    peak = peak_rss_mb()
+    return {
+        "side": side, "particles": particles.n, "steps": steps, "substeps": SUBSTEPS,
+        "baseline_rss_mb": baseline, "after_jit_rss_mb": after_jit,
+        "peak_rss_mb": peak, "net_rss_mb": peak - baseline, "episode_s": episode_s,
+    }
+
+
+def worker_compile(threads: int | None) -> dict[str, Any]:
+    """First vs second forward+backward of a tiny episode in this (fresh) process."""
+    init_s = _init(threads)
+    import taichi as ti
+
+    from dbtool.sim.simulator import Simulator
+
+    def episode() -> None:
+        scene, particles = make_block(COMPILE_SIDE)
+        sim = Simulator(scene, particles, n_steps=COMPILE_STEPS, substeps=SUBSTEPS,
+                        requires_grad=True)
+        sim.forward(make_actions(COMPILE_STEPS))
+        check_grads(sim.backward(loss_grad(particles.n)))
+
+    first, _ = timed(episode)
+    second, _ = timed(episode)
+    cache = os.environ.get("TI_OFFLINE_CACHE_FILE_PATH", "")
+    cfg_path = ti.lang.impl.current_cfg().offline_cache_file_path
+    return {
+        "init_s": init_s, "first_s": first, "second_s": second,
+        "compile_s": max(0.0, first - second),
+        "cache_dir": cache, "taichi_cache_path": cfg_path,
+    }
+
+
+def run_worker(args: argparse.Namespace) -> None:
+    if args.worker == "speed":
+        result = worker_speed(args.side, args.steps, args.repeats, args.threads)
+    elif args.worker == "memory":
+        result = worker_memory(args.side, args.steps, args.threads)
+    else:
+        result = worker_compile(args.threads)
+    Path(args.result_file).write_text(json.dumps(result))
+
+
+# --------------------------------------------------------------------------- driver
+def spawn(kind: str, extra: list[str], threads: int | None,
+          env_extra: dict[str, str] | None = None) -> dict[str, Any]:
+    """Run a worker in a fresh Python process and return its JSON result."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+    env.setdefault("TI_LOG_LEVEL", "warn")
+    env.update(env_extra or {})
+    with tempfile.TemporaryDirectory(prefix="dbtool-bench-") as tmp:
+        out = Path(tmp) / "result.json"
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", kind,
+               "--result-file", str(out), *extra]
+        if threads:
+            cmd += ["--threads", str(threads)]
+        proc = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True)
+        if proc.returncode != 0 or not out.exists():
+            tail = (proc.stdout + proc.stderr)[-4000:]
+            raise RuntimeError(f"{kind} worker failed (exit {proc.returncode}):\n{tail}")
+        return json.loads(out.read_text())
+
+
+def dir_stats(path: Path) -> tuple[int, int]:
+    files = [p for p in path.rglob("*") if p.is_file()]
+    return len(files), sum(p.stat().st_size for p in files)
+
+
+def measure_compile(threads: int | None) -> dict[str, Any]:
+    cache = Path(tempfile.mkdtemp(prefix="dbtool-ticache-"))
+    try:
+        env = {"TI_OFFLINE_CACHE_FILE_PATH": str(cache)}
+        cold = spawn("compile", [], threads, env)
+        files, size = dir_stats(cache)
+        warm = spawn("compile", [], threads, env)
+    finally:
+        shutil.rmtree(cache, ignore_errors=True)
+    honoured = files > 0 and cold["taichi_cache_path"] == str(cache)
+    if not honoured:
+        print("warning: Taichi did not write its offline cache to TI_OFFLINE_CACHE_FILE_PATH; "
+              "the cold number may have used a warm cache", file=sys.stderr)
+    return {
+        "episode": {"side": COMPILE_SIDE, "steps": COMPILE_STEPS, "substeps": SUBSTEPS},
+        "cold": cold, "warm": warm, "cache_files": files, "cache_bytes": size,
+        "cache_env_honoured": honoured,
+        "cold_compile_s": cold["compile_s"], "warm_cache_compile_s": warm["compile_s"],
+    }
+
+
+def cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor()
+
+
+def mem_total_gb() -> float | None:
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemTotal:"):
+                return int(line.split()[1]) / 1024.0 / 1024.0
+    except OSError:
+        pass
+    return None
+
+
+def machine_info(threads: int | None) -> dict[str, Any]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    def ver(pkg: str) -> str | None:
+        try:
+            return version(pkg)
+        except PackageNotFoundError:
+            return None
+
+    try:
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True,
+                                text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        commit = None
+    env_threads = int(os.environ.get("DBTOOL_THREADS", "0"))
+    return {
+        "cpu_count": os.cpu_count(), "cpu_model": cpu_model(),
+        "mem_total_gb": mem_total_gb(), "platform": platform.platform(),
+        "python": platform.python_version(),
+        "taichi": ver("taichi"), "numpy": ver("numpy"), "dbtool": ver("dbtool"),
+        "threads": threads or env_threads or os.cpu_count(), "arch": "cpu", "precision": "f32",
+        "git_commit": commit,
+    }
+
+
+def write_json(path: Path, data: dict[str, Any]) -> None:
+    """Write ``data`` atomically: a temporary file in the same folder, then a rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(data, fh, indent=2)
+            fh.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def evaluate_goals(speed: list[dict], memory: list[dict], compile_: dict | None) -> list[dict]:
+    """Each goal with its target, measured value and whether it is met (None: not measured)."""
+    def at_goal_size(rows: list[dict]) -> dict | None:
+        if not rows:
+            return None
+        best = min(rows, key=lambda r: abs(r["particles"] - GOAL_SIZE))
+        return best if abs(best["particles"] - GOAL_SIZE) <= 0.1 * GOAL_SIZE else None
+
+    s, m = at_goal_size(speed), at_goal_size(memory)
+    goals: list[dict] = []
+
+    def add(name: str, target: str, measured: str | None, met: bool | None) -> None:
+        goals.append({"goal": name, "target": target, "measured": measured, "met": met})
+
+    add("forward speed, 20k particles", f">= {GOAL_FWD_20K / 1e6:.0f} M particle-substeps/s",
+        f"{s['forward_pss'] / 1e6:.2f} M/s" if s else None,
+        s["forward_pss"] >= GOAL_FWD_20K if s else None)
+    add("backward / forward, 20k particles", f"<= {GOAL_BWD_RATIO:.0f}x",
+        f"{s['bwd_fwd_ratio']:.2f}x" if s else None,
+        s["bwd_fwd_ratio"] <= GOAL_BWD_RATIO if s else None)
+    worst = max((r["bwd_fwd_ratio"] for r in speed), default=None)
+    add("backward / forward, every size", f"<= {GOAL_BWD_RATIO:.0f}x",
+        f"{worst:.2f}x (worst)" if worst is not None else None,
+        worst <= GOAL_BWD_RATIO if worst is not None else None)
+    mem_ok = m is not None and m["steps"] >= 100
+    add("peak memory, 20k gradient episode T=100",
+        f"< 1.5 GB ({GOAL_MEM_BYTES / MIB:.0f} MiB)",
+        f"{m['peak_rss_mb']:.0f} MiB (T={m['steps']})" if m else None,
+        m["peak_rss_mb"] * MIB < GOAL_MEM_BYTES if mem_ok else None)
+    cold = compile_["cold_compile_s"] if compile_ else None
+    warm = compile_["warm_cache_compile_s"] if compile_ else None
+    add("compile, cold cache", f"<= {GOAL_COLD_S:.0f} s",
+        f"{cold:.1f} s" if cold is not None else None,
+        cold <= GOAL_COLD_S if cold is not None else None)
+    add("compile, warm cache", f"<= {GOAL_WARM_S:.0f} s",
+        f"{warm:.1f} s" if warm is not None else None,
+        warm <= GOAL_WARM_S if warm is not None else None)
+    return goals
+
+
+def render(result: dict[str, Any]) -> str:
+    """The markdown report of a run."""
+    mach = result["machine"]
+    lines = [
+        f"## dbtool simulator benchmark ({result['timestamp']})",
+        "",
+        f"Machine: {mach['cpu_model']}, {mach['cpu_count']} CPUs, {mach['threads']} Taichi "
+        f"threads, {mach['platform']}; taichi {mach['taichi']}, numpy {mach['numpy']}.",
+        f"Speed: T={result['config']['steps']} control steps x {SUBSTEPS} substeps, median of "
+        f"{result['config']['repeats']} runs after 1 warm-up. Memory: one gradient episode of "
+        f"T={result['config']['mem_steps']} per size, each in a fresh process. Forward: "
+        f"without gradients; fwd+bwd and bwd/fwd: the checkpointing forward of a gradient "
+        f"episode and its backward (re-simulation included).",
+        "",
+        "| particles | forward M p-substeps/s | fwd+bwd M p-substeps/s | bwd/fwd | "
+        f"peak RSS MiB (T={result['config']['mem_steps']}) | net of baseline MiB |",
+        "|---:|---:|---:|---:|---:|---:|",
+    ]
+    mem = {r["particles"]: r for r in result["memory"]}
+    for r in result["speed"]:
+        m = mem.get(r["particles"])
+        lines.append(
+            f"| {r['particles']} | {r['forward_pss'] / 1e6:.2f} | {r['fwd_bwd_pss'] / 1e6:.2f} | "
+            f"{r['bwd_fwd_ratio']:.2f}x | "
+            + (f"{m['peak_rss_mb']:.0f} | {m['net_rss_mb']:.0f} |" if m else "- | - |")
+        )
+    c = result.get("compile")
+    if c:
+        lines += [
+            "",
+            f"JIT compile (first minus second forward+backward, {COMPILE_SIDE}^3 particles, "
+            f"T={COMPILE_STEPS}): cold cache {c['cold_compile_s']:.1f} s, warm cache "
+            f"{c['warm_cache_compile_s']:.1f} s (Taichi init {c['cold']['init_s']:.1f} s; "
+            f"cache {c['cache_files']} files, {c['cache_bytes'] / MIB:.1f} MiB"
+            + ("" if c["cache_env_honoured"] else "; WARNING: cache dir not honoured") + ").",
+        ]
+    lines += ["", "| goal | target | measured | met |", "|---|---|---|---|"]
+    for g in result["goals"]:
+        met = {True: "yes", False: "**no**", None: "not measured"}[g["met"]]
+        lines.append(f"| {g['goal']} | {g['target']} | {g['measured'] or '-'} | {met} |")
+    lines += ["", f"Reference: {REFERENCE}."]
+    return "\n".join(lines)
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--sizes", type=int, nargs="+", default=[5000, 20000, 80000],
+                   help="approximate particle counts, each rounded to the nearest cube lattice "
+                        "(default: 5000 20000 80000 -> 4913 19683 79507)")
+    p.add_argument("--steps", type=int, default=20, help="control steps of the speed runs")
+    p.add_argument("--repeats", type=int, default=3, help="timed runs per number (median)")
+    p.add_argument("--mem-steps", type=int, default=100,
+                   help="control steps of the peak-memory episode (default 100, the real one)")
+    p.add_argument("--threads", type=int, default=None,
+                   help="Taichi CPU threads (default: DBTOOL_THREADS or the CPU count)")
+    p.add_argument("--quick", action="store_true",
+                   help="CI smoke test: 5k particles only, T=5, 1 repeat, memory at T=5")
+    p.add_argument("--skip-compile", action="store_true", help="skip the JIT compile timing")
+    p.add_argument("--out", type=Path, default=None,
+                   help=f"JSON output (default {DEFAULT_OUT.relative_to(ROOT)}, "
+                        f"{QUICK_OUT.relative_to(ROOT)} with --quick)")
+    p.add_argument("--worker", choices=["speed", "memory", "compile"], help=argparse.SUPPRESS)
+    p.add_argument("--side", type=int, help=argparse.SUPPRESS)
+    p.add_argument("--result-file", help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+    if args.quick:
+        args.sizes, args.steps, args.repeats, args.mem_steps = [5000], 5, 1, 5
+    if args.out is None:
+        args.out = QUICK_OUT if args.quick else DEFAULT_OUT
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    if args.worker:
+        run_worker(args)
+        return 0
+    started = time.time()
+    sides = sorted({side_for(n) for n in args.sizes})
+    speed: list[dict] = []
+    memory: list[dict] = []
+    compile_: dict | None = None
+
+    def log(msg: str) -> None:
+        print(f"[{time.time() - started:6.0f} s] {msg}", file=sys.stderr, flush=True)
+
+    if not args.skip_compile:
+        log("JIT compile: cold cache, then warm cache")
+        compile_ = measure_compile(args.threads)
+    for side in sides:
+        log(f"speed: {side ** 3} particles, T={args.steps}, {args.repeats} repeats")
+        speed.append(spawn("speed", ["--side", str(side), "--steps", str(args.steps),
+                                     "--repeats", str(args.repeats)], args.threads))
+        log(f"memory: {side ** 3} particles, T={args.mem_steps}")
+        memory.append(spawn("memory", ["--side", str(side), "--steps", str(args.mem_steps)],
+                            args.threads))
+
+    result: dict[str, Any] = {
+        "benchmark": "dbtool.sim",
+        "timestamp": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "wall_s": time.time() - started,
+        "seed": None,  # the workload is deterministic
+        "machine": machine_info(args.threads),
+        "config": {
+            "sizes": [s ** 3 for s in sides], "sides": sides, "steps": args.steps,
+            "substeps": SUBSTEPS, "repeats": args.repeats, "mem_steps": args.mem_steps,
+            "warmup_episodes": 1, "quick": args.quick, "spacing": SPACING, "dx": 0.005,
+            "E": E_MODULUS, "actions": f"{AMPLITUDE}*sin, 2 groups, period {PERIOD} steps",
+        },
+        "units": {"*_pss": "particle-substeps per second", "*_s": "seconds",
+                  "*_mb": "MiB (VmHWM / VmRSS)"},
+        "speed": speed, "memory": memory, "compile": compile_,
+        "reference": REFERENCE,
+    }
+    result["goals"] = evaluate_goals(speed, memory, compile_)
+    report = render(result)
+    result["report"] = report
+    write_json(args.out, result)
+    print(report, flush=True)
+    log(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

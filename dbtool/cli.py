@@ -1,0 +1,119 @@
+"""The ``dbtool`` command line: parse, call the library, print. No logic of its own."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import typer
+
+app = typer.Typer(add_completion=False, no_args_is_help=True,
+                  help="dbtool: breed soft robots with a diffusion prior and a differentiable "
+                       "MPM simulator (DiffuseBot).")
+
+
+def _fail(message: str) -> None:
+    typer.secho(f"error: {message}", err=True, fg=typer.colors.RED)
+    raise typer.Exit(code=2)
+
+
+@app.command()
+def tasks() -> None:
+    """List the six tasks with their setup, metric and prescribed controller."""
+    from dbtool.sim.tasks import TASKS
+
+    for name, cls in TASKS.items():
+        t = cls()
+        typer.secho(f"{name}", bold=True, nl=False)
+        typer.echo(f"  ({t.title}; workspace {'x'.join(map(str, t.workspace))}, "
+                   f"{t.n_groups} actuator groups)")
+        typer.echo(f"    setup:      {t.setup}")
+        typer.echo(f"    metric:     {t.metric_text}")
+        typer.echo(f"    controller: {t.controller_text}")
+
+
+@app.command()
+def simulate(
+    task: str = typer.Argument(..., help="balancing, landing, crawling, hurdling, gripping, box"),
+    shape: str = typer.Option("box", help="reference body: box, sphere, ellipsoid, cylinder, "
+                                          "star, table, finger"),
+    design: Path = typer.Option(None, help="a saved design (.npz) instead of a reference body"),
+    controller: str = typer.Option("prescribed", help="prescribed | none | design"),
+    out: Path = typer.Option(None, help="run directory (default runs/simulate-TASK-TIME)"),
+    steps: int = typer.Option(100, min=1, help="control steps (the paper uses 100)"),
+    seed: int = typer.Option(0, help="seed for numpy, torch and Python"),
+    arch: str = typer.Option("cpu", help="cpu | cuda | auto"),
+    gif: bool = typer.Option(True, help="also write an animated GIF"),
+) -> None:
+    """Simulate one body on a task; print the metric, write a montage PNG and a GIF."""
+    from dbtool.design import Design, DesignFileError
+    from dbtool.runs import RunDir, seed_everything
+    from dbtool.sim import runtime
+    from dbtool.sim.bodies import SHAPES
+    from dbtool.sim.simulator import SimulationError
+    from dbtool.sim.tasks import get_task
+
+    try:
+        t = get_task(task)
+        runtime.init(arch=arch)
+        if controller not in ("prescribed", "none", "design"):
+            raise ValueError(f"unknown controller {controller!r}; choose prescribed, none or "
+                             "design")
+        if design is not None:
+            d = Design.load(design)
+            if d.task != t.name:
+                raise ValueError(f"design {design} was made for task {d.task!r}, not {t.name!r}")
+            robot = d.robot
+        else:
+            if shape not in SHAPES:
+                raise ValueError(f"unknown shape {shape!r}; choose one of {', '.join(SHAPES)}")
+            robot = t.reference_robot(shape).compact()
+            d = None
+    except (ValueError, DesignFileError) as exc:
+        _fail(str(exc))
+    seed_everything(seed)
+    if controller == "prescribed":
+        actions = t.controller(steps)
+    elif controller == "design":
+        if d is None or len(d.controller) < steps:
+            _fail("--controller design needs a --design whose controller covers the steps")
+        actions = d.controller[:steps]
+    else:
+        actions = t.controller(steps) * 0.0
+    out = out or Path("runs") / f"simulate-{t.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    config = {"command": "simulate", "task": t.name, "shape": None if design else shape,
+              "design": str(design) if design else None, "controller": controller,
+              "steps": steps, "substeps": 17, "seed": seed, "arch": arch}
+    run = RunDir(out, config, seed, runtime.device())
+    from tqdm import tqdm
+
+    from dbtool.sim.rollout import simulate as run_episode
+    from dbtool.viz.render import animation, montage
+
+    start = time.perf_counter()
+    with tqdm(total=steps, desc=f"{t.name}", unit="step", file=sys.stderr,
+              disable=None) as bar:
+        try:
+            ro = run_episode(t, robot, actions, n_steps=steps,
+                             progress=lambda k: bar.update(1))
+        except (SimulationError, ValueError, FloatingPointError) as exc:
+            _fail(str(exc))
+    seconds = time.perf_counter() - start
+    run.log(task=t.name, metric=ro.metric, particles=len(ro.episode.particles.x0),
+            seconds=seconds)
+    png = montage(ro.episode, ro.positions, run.file("montage.png"),
+                  title=f"{t.title}: metric {ro.metric:.4f}")
+    typer.echo(f"{t.name}: metric = {ro.metric:.6f}  ({t.metric_text})")
+    typer.echo(f"particles: {len(ro.episode.particles.x0)}, {seconds:.1f} s")
+    typer.echo(f"montage:   {png}")
+    if gif:
+        typer.echo(f"animation: {animation(ro.episode, ro.positions, run.file('rollout.gif'))}")
+
+
+def main() -> None:  # pragma: no cover
+    app()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

@@ -1,0 +1,92 @@
+"""Run directories: resolved config, manifest (versions, seed, git sha, device) and metrics."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import random
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def seed_everything(seed: int) -> None:
+    """Seed Python, NumPy and torch (Taichi kernels here are deterministic given inputs)."""
+    random.seed(seed)
+    np.random.seed(seed)
+    try:
+        import torch
+
+        torch.manual_seed(seed)
+    except ImportError:  # pragma: no cover
+        pass
+
+
+def write_json(path: Path, obj) -> Path:
+    """Write JSON atomically (temp file in the same folder, then rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(suffix=".json", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(obj, fh, indent=2, default=_default)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    return path
+
+
+def _default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def _git_sha() -> str | None:
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                             timeout=5, cwd=Path(__file__).parent)
+        return out.stdout.strip() or None
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def manifest(seed: int, device: str) -> dict:
+    """Versions, seed, git sha and device of a run."""
+    import taichi
+    import torch
+
+    import dbtool
+
+    return {
+        "dbtool": dbtool.__version__, "python": platform.python_version(),
+        "platform": platform.platform(), "numpy": np.__version__, "torch": torch.__version__,
+        "taichi": ".".join(map(str, taichi.__version__)), "seed": seed, "device": device,
+        "git_sha": _git_sha(), "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+
+
+class RunDir:
+    """A run directory with ``config.json``, ``manifest.json`` and ``metrics.jsonl``."""
+
+    def __init__(self, path: str | Path, config: dict, seed: int, device: str) -> None:
+        self.path = Path(path)
+        self.path.mkdir(parents=True, exist_ok=True)
+        write_json(self.path / "config.json", config)
+        write_json(self.path / "manifest.json", manifest(seed, device))
+
+    def log(self, **metrics) -> None:
+        with open(self.path / "metrics.jsonl", "a") as fh:
+            fh.write(json.dumps(metrics, default=_default) + "\n")
+
+    def file(self, name: str) -> Path:
+        return self.path / name
