@@ -29,7 +29,8 @@ def particle_colours(ep) -> np.ndarray:
     return cols
 
 
-def _draw(ax, ep, x: np.ndarray, cols, max_points: int, title: str | None) -> None:
+def draw_frame(ax, ep, x: np.ndarray, cols, max_points: int, title: str | None) -> None:
+    """Draw one frame of a rollout (active particles, colliders, ground) on a 3-D axis."""
     keep = ep.particles.phi > 0
     idx = np.flatnonzero(keep)
     if len(idx) > max_points:
@@ -87,7 +88,7 @@ def montage(ep, positions: np.ndarray, path, frames: int = 6, max_points: int = 
     cols = particle_colours(ep)
     for k, t in enumerate(steps):
         ax = fig.add_subplot(1, frames, k + 1, projection="3d")
-        _draw(ax, ep, positions[t], cols, max_points, f"step {t}")
+        draw_frame(ax, ep, positions[t], cols, max_points, f"step {t}")
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
@@ -107,7 +108,7 @@ def animation(ep, positions: np.ndarray, path, every: int = 4, max_points: int =
     for t in range(0, len(positions), every):
         fig.clf()
         ax = fig.add_subplot(1, 1, 1, projection="3d")
-        _draw(ax, ep, positions[t], cols, max_points, f"step {t}")
+        draw_frame(ax, ep, positions[t], cols, max_points, f"step {t}")
         fig.canvas.draw()
         images.append(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy())
     plt.close(fig)

@@ -1,0 +1,63 @@
+"""The command line, run as a user would (a subprocess of the installed entry point)."""
+
+import subprocess
+import sys
+
+import numpy as np
+
+from dbtool.design import Design
+from dbtool.sim.tasks import get_task
+
+
+def _run(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "dbtool.cli", *args], capture_output=True,
+                          text=True, cwd=cwd, timeout=600)
+
+
+def test_tasks_lists_six():
+    out = _run("tasks")
+    assert out.returncode == 0
+    for name in ("balancing", "landing", "crawling", "hurdling", "gripping", "box"):
+        assert f"\n{name}" in "\n" + out.stdout
+
+
+def test_simulate_writes_metric_montage_and_run_dir(tmp_path):
+    out = _run("simulate", "crawling", "--shape", "box", "--steps", "8", "--out",
+               str(tmp_path / "run"))
+    assert out.returncode == 0, out.stderr
+    assert "crawling: metric =" in out.stdout
+    metric = float(out.stdout.split("metric =")[1].split()[0])
+    assert np.isfinite(metric)
+    for name in ("montage.png", "rollout.gif", "config.json", "manifest.json", "metrics.jsonl"):
+        assert (tmp_path / "run" / name).stat().st_size > 0
+
+
+def test_simulate_a_saved_design(tmp_path):
+    task = get_task("hurdling")
+    Design("hurdling", task.reference_robot("cylinder"), task.controller()).save(
+        tmp_path / "d.npz")
+    out = _run("simulate", "hurdling", "--design", str(tmp_path / "d.npz"), "--steps", "4",
+               "--controller", "design", "--no-gif", "--out", str(tmp_path / "r"))
+    assert out.returncode == 0, out.stderr
+
+
+def test_bad_input_is_one_line_and_nonzero(tmp_path):
+    bad = tmp_path / "bad.npz"
+    bad.write_text("garbage")
+    task = get_task("crawling")
+    robot = task.reference_robot("box")
+    robot.occupancy[:] = 0.0
+    Design("crawling", robot, task.controller()).save(tmp_path / "empty.npz")
+    cases = [
+        (("simulate", "walking"), "unknown task"),
+        (("simulate", "crawling", "--design", str(tmp_path / "none.npz")), "not found"),
+        (("simulate", "crawling", "--design", str(bad)), "not a design file"),
+        (("simulate", "crawling", "--shape", "blob"), "unknown shape"),
+        (("simulate", "crawling", "--design", str(tmp_path / "empty.npz")), "empty"),
+    ]
+    for args, message in cases:
+        out = _run(*args)
+        assert out.returncode != 0
+        errors = [line for line in out.stderr.splitlines() if line.startswith("error:")]
+        assert len(errors) == 1 and message in errors[0], out.stderr
+        assert "Traceback" not in out.stderr

@@ -1,0 +1,113 @@
+"""The six tasks: setup, metric ranges, prescribed controllers, robustness on random bodies."""
+
+import numpy as np
+import pytest
+
+from dbtool.sim.bodies import random_occupancy
+from dbtool.sim.rollout import simulate
+from dbtool.sim.simulator import SimulationError
+from dbtool.sim.tasks import TASKS, get_task
+
+
+def test_six_tasks():
+    assert list(TASKS) == ["balancing", "landing", "crawling", "hurdling", "gripping", "box"]
+    with pytest.raises(ValueError, match="unknown task"):
+        get_task("walking")
+
+
+@pytest.mark.parametrize("name", list(TASKS))
+@pytest.mark.parametrize("shape", ["box", "sphere"])
+def test_metric_finite_and_in_range(name, shape):
+    task = get_task(name)
+    ro = simulate(task, task.reference_robot(shape).compact())
+    lo, hi = task.metric_range
+    assert np.isfinite(ro.metric)
+    assert lo <= ro.metric <= hi, f"{name}/{shape}: {ro.metric}"
+    assert ro.positions.shape[0] == 101
+
+
+def test_task_setups_follow_the_spec():
+    bal = get_task("balancing")
+    ep = bal.episode(bal.reference_robot("box").compact())
+    (c, h), = ep.scene.boxes
+    np.testing.assert_allclose(np.array(h) * 2, [0.02, 0.05, 0.02])
+    assert ep.particles.v0[ep.robot_mask, 1].min() == pytest.approx(0.5)
+    assert ep.particles.x0[:, 1].min() >= c[1] + h[1]  # atop the stick
+
+    land = get_task("landing")
+    ep = land.episode(land.reference_robot("box").compact())
+    start = ep.particles.x0.mean(0)
+    np.testing.assert_allclose(start - land.target(), [-0.08, 0.045, 0.0], atol=1e-9)
+
+    hur = get_task("hurdling")
+    ep = hur.episode(hur.reference_robot("box").compact())
+    (c, h), = ep.scene.boxes
+    np.testing.assert_allclose(np.array(h) * 2, [0.01, 0.03, 0.12])
+    assert c[0] - ep.particles.x0[:, 0].mean() == pytest.approx(0.07, abs=1e-9)
+    a = hur.controller()
+    np.testing.assert_allclose(a[29], [1.0, 0.3])
+    assert np.all(a[30:] == 0) and np.all(a[0] == 0)
+
+    crawl = get_task("crawling")
+    a = crawl.controller()
+    assert a.shape == (100, 4) and np.abs(a).max() == pytest.approx(0.3, abs=1e-3)
+
+    grip = get_task("gripping")
+    a = grip.controller()
+    np.testing.assert_allclose(a[0], [1, 0])
+    np.testing.assert_allclose(a[49], [0, 0])
+    np.testing.assert_allclose(a[50], [1, 0])
+    np.testing.assert_allclose(a[99], [0, 0])
+
+    box = get_task("box")
+    ep = box.episode(box.reference_robot("box").compact())
+    cube = ep.particles.x0[ep.object_mask].mean(0)
+    body = ep.particles.x0[ep.robot_mask].mean(0)
+    assert cube[0] - body[0] == pytest.approx(0.08, abs=1e-9)
+    np.testing.assert_allclose(box.controller()[-1], [1.0, 0.0])
+
+
+def test_hurdling_groups_first_is_nearer_the_obstacle():
+    task = get_task("hurdling")
+    r = task.reference_robot("box")
+    x = r.points[:, 0]
+    assert x[r.actuators[:, 0] > 0].mean() > x[r.actuators[:, 1] > 0].mean()
+
+
+def test_crawler_with_prescribed_controller_moves():
+    task = get_task("crawling")
+    ro = simulate(task, task.reference_robot("box").compact())
+    passive = simulate(task, task.reference_robot("box").compact(), np.zeros((100, 4)))
+    assert abs(ro.metric) > 1e-3, ro.metric
+    assert abs(passive.metric) < 1e-4
+
+
+def test_gripper_fingers_close():
+    task = get_task("gripping")
+    ro = simulate(task, task.reference_robot("sphere").compact())
+    d = task.tip_distance(ro.episode, ro.positions)
+    assert d.min() < d[0] - 2e-3, f"tip distance {d[0]:.4f} -> min {d.min():.4f}"
+    mirror = ro.episode.info["finger"]
+    assert (mirror == 1).sum() == (mirror == 2).sum() > 0
+
+
+def test_empty_body_is_a_clear_error():
+    task = get_task("crawling")
+    with pytest.raises(ValueError, match="empty"):
+        task.make_robot(np.zeros(len(task.design_points())))
+
+
+@pytest.mark.parametrize("name", list(TASKS))
+def test_random_bodies_never_blow_up(name):
+    task = get_task(name)
+    rng = np.random.default_rng(1234)
+    pts = task.design_points()
+    for i in range(20):
+        occ = random_occupancy(pts, task.design_workspace(), rng)
+        stiffness = rng.uniform(1e4, 1e5, len(pts))
+        robot = task.make_robot(occ, stiffness).compact()
+        try:
+            ro = simulate(task, robot)
+        except SimulationError as exc:  # pragma: no cover - must not happen
+            pytest.fail(f"random body {i} blew up on {name}: {exc}")
+        assert np.isfinite(ro.metric) and np.all(np.isfinite(ro.positions))
