@@ -111,6 +111,110 @@ def simulate(
         typer.echo(f"animation: {animation(ro.episode, ro.positions, run.file('rollout.gif'))}")
 
 
+DEFAULT_BODY = {"gripping": "finger"}
+
+
+@app.command()
+def design(
+    task: str = typer.Argument(..., help="balancing, landing, crawling, hurdling, gripping, box"),
+    iterations: int = typer.Option(4, min=0, help="gradient steps on the design"),
+    shape: str = typer.Option(None, help="starting reference body (default: box; finger for "
+                                         "gripping)"),
+    steps: int = typer.Option(100, min=1, help="control steps per episode"),
+    out: Path = typer.Option(None, help="run directory (default runs/design-TASK-TIME)"),
+    seed: int = typer.Option(0, help="seed for numpy, torch and Python"),
+    arch: str = typer.Option("cpu", help="cpu | cuda | auto"),
+) -> None:
+    """Design a robot for TASK and save it (design.npz) in a run directory.
+
+    Until the diffusion prior lands this runs the particle-based baseline (SPEC section 7):
+    a reference body whose per-particle geometry, softness and actuator logits, and the
+    open-loop controller, follow the simulator's gradients.
+    """
+    from dbtool.baselines.particle import optimise
+    from dbtool.design import Design
+    from dbtool.runs import RunDir, seed_everything
+    from dbtool.sim import runtime
+    from dbtool.sim.bodies import SHAPES
+    from dbtool.sim.rollout import simulate as run_episode
+    from dbtool.sim.simulator import SimulationError
+    from dbtool.sim.tasks import get_task
+    from dbtool.viz.render import montage
+
+    try:
+        t = get_task(task)
+        runtime.init(arch=arch)
+        shape = shape or DEFAULT_BODY.get(t.name, "box")
+        if shape not in SHAPES:
+            raise ValueError(f"unknown shape {shape!r}; choose one of {', '.join(SHAPES)}")
+    except ValueError as exc:
+        _fail(str(exc))
+    seed_everything(seed)
+    out = out or Path("runs") / f"design-{t.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    config = {"command": "design", "task": t.name, "method": "particle-baseline",
+              "start_shape": shape, "iterations": iterations, "steps": steps, "seed": seed,
+              "arch": arch}
+    run = RunDir(out, config, seed, runtime.device())
+    from tqdm import tqdm
+
+    try:
+        with tqdm(total=iterations, desc=f"design {t.name}", unit="iter", file=sys.stderr,
+                  disable=None) as bar:
+            def log(k, metric, _d):
+                run.log(iteration=k, metric=metric)
+                bar.set_postfix(metric=f"{metric:.5f}")
+                bar.update(1)
+
+            d = optimise(t, t.reference_robot(shape), iterations, n_steps=steps, callback=log)
+        robot, actions = d.robot(), d.actions.detach().numpy()
+        ro = run_episode(t, robot.compact(), actions, n_steps=steps)
+    except (SimulationError, ValueError, FloatingPointError) as exc:
+        _fail(str(exc))
+    run.log(iteration=iterations, metric=ro.metric, final=True)
+    result = Design(t.name, robot, actions, metrics={t.name: ro.metric},
+                    meta={"method": "particle-baseline", "seed": seed, "iterations": iterations,
+                          "start_shape": shape})
+    path = result.save(run.file("design.npz"))
+    montage(ro.episode, ro.positions, run.file("montage.png"),
+            title=f"{t.title}: metric {ro.metric:.4f}")
+    typer.echo(f"{t.name}: final metric = {ro.metric:.6f}")
+    typer.echo(f"design:  {path}")
+
+
+def _latest_design() -> Path | None:
+    found = sorted(Path("runs").glob("design-*/design.npz"), key=lambda p: p.stat().st_mtime)
+    return found[-1] if found else None
+
+
+@app.command()
+def export(
+    design: Path = typer.Option(None, help="design file (default: the newest runs/design-*/)"),
+    stl: bool = typer.Option(False, "--stl", help="write STL meshes"),
+    threemf: bool = typer.Option(False, "--3mf", help="write 3MF meshes"),
+    out: Path = typer.Option(Path("exports"), help="output folder"),
+    scale: float = typer.Option(1000.0, help="millimetres per simulation unit"),
+) -> None:
+    """Export a design for fabrication: watertight meshes in mm and a report."""
+    from dbtool.design import Design, DesignFileError
+    from dbtool.export.assembly import export_design
+
+    formats = [f for f, on in (("stl", stl), ("3mf", threemf)) if on] or ["stl"]
+    path = design or _latest_design()
+    if path is None:
+        _fail("no design found under runs/; run `dbtool design TASK` or pass --design FILE")
+    try:
+        d = Design.load(path)
+        rep = export_design(d, out / d.task, formats, scale)
+    except (DesignFileError, ValueError) as exc:
+        _fail(str(exc))
+    for f in rep["files"]:
+        typer.echo(f"wrote {f}")
+    a = rep["parts"]["assembly"]
+    typer.echo(f"assembly: watertight={a['watertight']} volume={a['volume_mm3']:.0f} mm^3 "
+               f"bbox={a['bbox_mm']} mm")
+    typer.echo(f"report:  {out / d.task / 'report.json'}")
+
+
 def main() -> None:  # pragma: no cover
     app()
 

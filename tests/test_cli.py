@@ -61,3 +61,21 @@ def test_bad_input_is_one_line_and_nonzero(tmp_path):
         errors = [line for line in out.stderr.splitlines() if line.startswith("error:")]
         assert len(errors) == 1 and message in errors[0], out.stderr
         assert "Traceback" not in out.stderr
+
+
+def test_design_then_export(tmp_path):
+    out = _run("design", "gripping", "--iterations", "1", "--steps", "4", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    found = list((tmp_path / "runs").glob("design-gripping-*/design.npz"))
+    assert len(found) == 1
+    d = Design.load(found[0])
+    assert d.task == "gripping" and d.controller.shape == (4, 2)
+    out = _run("export", "--stl", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "exports" / "gripping" / "gripping_assembly.stl").stat().st_size > 0
+    assert "watertight=True" in out.stdout
+
+
+def test_export_without_a_design_fails_cleanly(tmp_path):
+    out = _run("export", "--stl", cwd=tmp_path)
+    assert out.returncode != 0 and "no design found" in out.stderr

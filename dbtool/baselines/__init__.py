@@ -1,0 +1,1 @@
+"""Baseline design representations optimised through the simulator (SPEC section 7)."""

@@ -1,0 +1,1 @@
+"""Export for fabrication (SPEC section 8): watertight meshes in millimetres."""
