@@ -479,6 +479,10 @@ def main(argv: list[str] | None = None) -> int:
         run_worker(args)
         return 0
     started = time.time()
+    load_start = os.getloadavg()
+    if load_start[0] > 0.5:
+        print(f"warning: the machine is busy (1-min load {load_start[0]:.2f}); wall-clock "
+              "numbers will be low", file=sys.stderr)
     sides = sorted({side_for(n) for n in args.sizes})
     speed: list[dict] = []
     memory: list[dict] = []
@@ -503,6 +507,7 @@ def main(argv: list[str] | None = None) -> int:
         "timestamp": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "wall_s": time.time() - started,
         "seed": None,  # the workload is deterministic
+        "loadavg_start": list(load_start), "loadavg_end": list(os.getloadavg()),
         "machine": machine_info(args.threads),
         "config": {
             "sizes": [s ** 3 for s in sides], "sides": sides, "steps": args.steps,
