@@ -28,6 +28,7 @@ import os
 
 import matplotlib.pyplot as plt
 import numpy as np
+from IPython.display import Image
 
 from dbtool.sim import runtime
 from dbtool.sim.rollout import simulate
@@ -60,6 +61,8 @@ for k, (name, ro) in enumerate(results.items()):
         draw_frame(ax, ro.episode, ro.positions[t], cols, 3000, label)
 fig.tight_layout()
 fig.savefig("fig03_tasks.png", dpi=110)
+plt.close(fig)
+Image("fig03_tasks.png")
 
 # %% [markdown]
 # The metric of each task, as printed above, is the quantity the co-design maximises.
