@@ -159,19 +159,18 @@ def worker_speed(side: int, steps: int, repeats: int, threads: int | None) -> di
     actions, grad_x = make_actions(steps), loss_grad(n)
     work = n * steps * SUBSTEPS
 
-    def forward_only() -> list[float]:  # its arrays are freed on return
-        sim = Simulator(scene, particles, n_steps=steps, substeps=SUBSTEPS, requires_grad=False)
-        sim.forward(actions)  # warm-up (and JIT / cache load)
-        return [timed(lambda: sim.forward(actions))[0] for _ in range(repeats)]
-
-    t_fwd = forward_only()
-
+    # Both simulators live side by side and their timed runs interleave, so the forward-only
+    # and the gradient numbers see the same machine conditions.
+    sim = Simulator(scene, particles, n_steps=steps, substeps=SUBSTEPS, requires_grad=False)
     gsim = Simulator(scene, particles, n_steps=steps, substeps=SUBSTEPS, requires_grad=True)
+    sim.forward(actions)  # warm-up (and JIT / cache load)
     gsim.forward(actions)
-    check_grads(gsim.backward(grad_x))  # warm-up
+    check_grads(gsim.backward(grad_x))
+    t_fwd: list[float] = []
     t_gfwd: list[float] = []
     t_bwd: list[float] = []
     for _ in range(repeats):
+        t_fwd.append(timed(lambda: sim.forward(actions))[0])
         t_gfwd.append(timed(lambda: gsim.forward(actions))[0])
         seconds, grads = timed(lambda: gsim.backward(grad_x))
         t_bwd.append(seconds)
@@ -255,6 +254,23 @@ def run_worker(args: argparse.Namespace) -> None:
 
 
 # --------------------------------------------------------------------------- driver
+def busy_cpu_s() -> float | None:
+    """CPU seconds spent by all processes of the machine so far (``/proc/stat``), or None."""
+    try:
+        fields = [int(v) for v in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
+    except (OSError, ValueError):
+        return None
+    idle = fields[3] + (fields[4] if len(fields) > 4 else 0)  # idle + iowait
+    return (sum(fields[:8]) - idle) / os.sysconf("SC_CLK_TCK")
+
+
+def children_cpu_s() -> float:
+    import resource
+
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
 def spawn(kind: str, extra: list[str], threads: int | None,
           env_extra: dict[str, str] | None = None) -> dict[str, Any]:
     """Run a worker in a fresh Python process and return its JSON result."""
@@ -268,11 +284,18 @@ def spawn(kind: str, extra: list[str], threads: int | None,
                "--result-file", str(out), *extra]
         if threads:
             cmd += ["--threads", str(threads)]
+        busy0, own0, wall0 = busy_cpu_s(), children_cpu_s(), time.perf_counter()
         proc = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True)
+        busy1, own1, wall1 = busy_cpu_s(), children_cpu_s(), time.perf_counter()
         if proc.returncode != 0 or not out.exists():
             tail = (proc.stdout + proc.stderr)[-4000:]
             raise RuntimeError(f"{kind} worker failed (exit {proc.returncode}):\n{tail}")
-        return json.loads(out.read_text())
+        result = json.loads(out.read_text())
+    # CPU cores other processes kept busy meanwhile: wall-clock numbers suffer when > ~0.1.
+    if busy0 is not None and busy1 is not None:
+        other = max(0.0, (busy1 - busy0) - (own1 - own0)) / max(wall1 - wall0, 1e-9)
+        result["other_load_cores"] = round(other, 3)
+    return result
 
 
 def dir_stats(path: Path) -> tuple[int, int]:
@@ -436,6 +459,14 @@ def render(result: dict[str, Any]) -> str:
             f"cache {c['cache_files']} files, {c['cache_bytes'] / MIB:.1f} MiB"
             + ("" if c["cache_env_honoured"] else "; WARNING: cache dir not honoured") + ").",
         ]
+    loads = [r.get("other_load_cores") for r in result["speed"]]
+    if c:
+        loads += [c["cold"].get("other_load_cores"), c["warm"].get("other_load_cores")]
+    worst = max((x for x in loads if x is not None), default=None)
+    if worst is not None:
+        verdict = "WARNING: the timings are not clean" if worst > 0.1 else "clean"
+        lines += ["", f"Other processes kept at most {worst:.2f} CPU cores busy during a timed "
+                      f"stage ({verdict})."]
     lines += ["", "| goal | target | measured | met |", "|---|---|---|---|"]
     for g in result["goals"]:
         met = {True: "yes", False: "**no**", None: "not measured"}[g["met"]]
@@ -480,9 +511,6 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     started = time.time()
     load_start = os.getloadavg()
-    if load_start[0] > 0.5:
-        print(f"warning: the machine is busy (1-min load {load_start[0]:.2f}); wall-clock "
-              "numbers will be low", file=sys.stderr)
     sides = sorted({side_for(n) for n in args.sizes})
     speed: list[dict] = []
     memory: list[dict] = []
