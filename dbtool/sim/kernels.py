@@ -55,8 +55,7 @@ def _range(c, chunks, n):
 @ti.func
 def _stress(
     C: ti.template(), F: ti.template(), A: ti.template(), phi: ti.template(), E: ti.template(),
-    wact: ti.template(), adir: ti.template(), act: ti.template(), s, t, p,
-    dx, dt, p_vol, p_rho, nu, act_strength,
+    actp: ti.template(), adir: ti.template(), s, p, dx, dt, p_vol, p_rho, nu, act_strength,
 ):
     """``F[s+1] = (I + dt C) F`` and the APIC affine matrix ``A[s]`` of particle ``p``."""
     inv_dx = 1.0 / dx
@@ -67,9 +66,7 @@ def _stress(
     e = E[p]
     mu = e / (2.0 * (1.0 + nu))
     lam = e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
-    a = 0.0
-    for g in ti.static(range(MAX_GROUPS)):
-        a += wact[p, g] * act[t, g]
+    a = actp[p]
     Fd = Fn @ adir[p]
     tau = mu * (Fn @ Fn.transpose() - eye) + (lam * J * (J - 1.0)) * eye
     tau -= (a * act_strength * e) * Fd.outer_product(Fd)
@@ -81,26 +78,37 @@ def _stress(
 
 @ti.kernel
 def stress(
-    C: nd(), F: nd(), A: nd(), phi: nd(), E: nd(), wact: nd(), adir: nd(), act: nd(),
-    s: ti.i32, t: ti.i32, n: ti.i32,
+    C: nd(), F: nd(), A: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
+    s: ti.i32, n: ti.i32,
     dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
 ):
     """Constitutive step alone; its Taichi-autodiff ``stress.grad`` is the backward pass."""
     for p in range(n):
-        _stress(C, F, A, phi, E, wact, adir, act, s, t, p, dx, dt, p_vol, p_rho, nu,
-                act_strength)
+        _stress(C, F, A, phi, E, actp, adir, s, p, dx, dt, p_vol, p_rho, nu, act_strength)
+
+
+@ti.kernel
+def actuation(wact: nd(), act: nd(), actp: nd(), t: ti.i32, n: ti.i32):
+    """Per-particle muscle signal of control step ``t``: ``a_p = sum_g w_pg u_tg``.
+
+    It is constant over the step's substeps, so its Taichi-autodiff ``actuation.grad`` runs
+    once per control step on the adjoint accumulated over the substeps."""
+    for p in range(n):
+        a = 0.0
+        for g in ti.static(range(MAX_GROUPS)):
+            a += wact[p, g] * act[t, g]
+        actp[p] = a
 
 
 # --------------------------------------------------------------------------- p2g
 @ti.func
 def _p2g_particle(
     x: ti.template(), v: ti.template(), C: ti.template(), F: ti.template(), A: ti.template(),
-    phi: ti.template(), E: ti.template(), wact: ti.template(), adir: ti.template(),
-    act: ti.template(), scratch: ti.template(), s, t, p, c, lo, hi, dx, dt, p_vol, p_rho, nu,
+    phi: ti.template(), E: ti.template(), actp: ti.template(), adir: ti.template(),
+    scratch: ti.template(), s, p, c, lo, hi, dx, dt, p_vol, p_rho, nu,
     act_strength, atomic: ti.template(),
 ):
-    Ap = _stress(C, F, A, phi, E, wact, adir, act, s, t, p, dx, dt, p_vol, p_rho, nu,
-                 act_strength)
+    Ap = _stress(C, F, A, phi, E, actp, adir, s, p, dx, dt, p_vol, p_rho, nu, act_strength)
     m_unit = p_rho * p_vol
     inv_dx = 1.0 / dx
     xp = x[s, p]
@@ -123,8 +131,8 @@ def _p2g_particle(
 
 @ti.kernel
 def p2g(
-    x: nd(), v: nd(), C: nd(), F: nd(), A: nd(), phi: nd(), E: nd(), wact: nd(), adir: nd(),
-    act: nd(), scratch: nd(), s: ti.i32, t: ti.i32, n: ti.i32, chunks: ti.i32,
+    x: nd(), v: nd(), C: nd(), F: nd(), A: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
+    scratch: nd(), s: ti.i32, n: ti.i32, chunks: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
     dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
 ):
@@ -137,31 +145,34 @@ def p2g(
         c = q // SPREAD
         a, b = _range(c, chunks, n)
         for p in range(a, b):
-            _p2g_particle(x, v, C, F, A, phi, E, wact, adir, act, scratch, s, t, p, c, lo, hi,
+            _p2g_particle(x, v, C, F, A, phi, E, actp, adir, scratch, s, p, c, lo, hi,
                           dx, dt, p_vol, p_rho, nu, act_strength, False)
 
 
 @ti.kernel
 def p2g_atomic(
-    x: nd(), v: nd(), C: nd(), F: nd(), A: nd(), phi: nd(), E: nd(), wact: nd(), adir: nd(),
-    act: nd(), scratch: nd(), s: ti.i32, t: ti.i32, n: ti.i32,
+    x: nd(), v: nd(), C: nd(), F: nd(), A: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
+    scratch: nd(), s: ti.i32, n: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
     dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
 ):
     """Massively parallel variant of :func:`p2g` (GPU): one grid copy, atomic adds."""
     lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
     for p in range(n):
-        _p2g_particle(x, v, C, F, A, phi, E, wact, adir, act, scratch, s, t, p, 0, lo, hi,
+        _p2g_particle(x, v, C, F, A, phi, E, actp, adir, scratch, s, p, 0, lo, hi,
                       dx, dt, p_vol, p_rho, nu, act_strength, True)
 
 
 @ti.kernel
 def p2g_grad(
     x: nd(), v: nd(), A: nd(), phi: nd(), ggrid: nd(), xg: nd(), vg: nd(), Ag: nd(), phig: nd(),
-    s: ti.i32, n: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
+    Cg: nd(), Fg: nd(), s: ti.i32, n: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
     dx: float, m_unit: float,
 ):
-    """Adjoint of :func:`p2g`: gather node adjoints ``ggrid = (dL/d mv, dL/d m)``."""
+    """Adjoint of the scatter in :func:`p2g`: gather node adjoints ``ggrid = (dL/d mv, dL/d m)``.
+
+    Also zeroes the ``C`` and ``F`` adjoints of substep ``s``, which ``stress.grad`` fills next.
+    """
     lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
     for p in range(n):
         inv_dx = 1.0 / dx
@@ -172,9 +183,12 @@ def p2g_grad(
         m = m_unit * phi[p]
         vp = v[s, p]
         Ap = A[s, p]
-        gx = ti.Vector([0.0, 0.0, 0.0])
-        gv = ti.Vector([0.0, 0.0, 0.0])
-        gA = ti.Matrix.zero(float, 3, 3)
+        # dpos = (off - fx) dx, so A dpos = dx (A off - A fx) and every sum over the nodes of
+        # something times dpos splits into a sum with the constant offsets and one with fx.
+        Afx = Ap @ fx
+        sg = ti.Vector([0.0, 0.0, 0.0])  # sum w g
+        sgo = ti.Matrix.zero(float, 3, 3)  # sum w g (x) off
+        sc = ti.Vector([0.0, 0.0, 0.0])  # sum (dL/d w) dw/dfx
         gm = 0.0
         for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
             off = ti.Vector([i, j, k])
@@ -187,16 +201,19 @@ def p2g_grad(
                 w[i][0] * dw[j][1] * w[k][2],
                 w[i][0] * w[j][1] * dw[k][2],
             ])
-            dpos = (ti.cast(off, float) - fx) * dx
-            c = g.dot(m * vp + Ap @ dpos) + gg[3] * m
-            gx += (inv_dx * c) * dwt - wt * (Ap.transpose() @ g)
-            gv += (wt * m) * g
-            gA += wt * g.outer_product(dpos)
-            gm += wt * (g.dot(vp) + gg[3])
-        xg[s, p] = xg[s, p] + gx
-        vg[s, p] = gv
-        Ag[s, p] = gA
+            q = Ap @ ti.cast(off, float) - Afx
+            gvv = g.dot(vp) + gg[3]
+            sc += (m * gvv + dx * g.dot(q)) * dwt
+            wg = wt * g
+            sg += wg
+            sgo += wg.outer_product(ti.cast(off, float))
+            gm += wt * gvv
+        xg[s, p] = xg[s, p] + inv_dx * sc - Ap.transpose() @ sg
+        vg[s, p] = m * sg
+        Ag[s, p] = dx * (sgo - sg.outer_product(fx))
         phig[p] = phig[p] + m_unit * gm
+        Cg[s, p] = ti.Matrix.zero(float, 3, 3)
+        Fg[s, p] = ti.Matrix.zero(float, 3, 3)
 
 
 # --------------------------------------------------------------------------- grid
@@ -376,6 +393,7 @@ def _g2p_grad_particle(
     gnv = keep * (vg[s + 1, p] + dt * gx1)
     gnC = keep * Cg[s + 1, p]
     gfx = ti.Vector([0.0, 0.0, 0.0])
+    swg = ti.Vector([0.0, 0.0, 0.0])  # sum w v_node, for the -4/dx w gnC^T v_node term
     for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
         off = ti.Vector([i, j, k])
         I = base + off
@@ -386,15 +404,15 @@ def _g2p_grad_particle(
             w[i][0] * dw[j][1] * w[k][2],
             w[i][0] * w[j][1] * dw[k][2],
         ])
-        u = ti.cast(off, float) - fx
-        Cu = gnC @ u
+        Cu = gnC @ (ti.cast(off, float) - fx)
         gfx += dwt * (gnv.dot(gv) + 4.0 * inv_dx * gv.dot(Cu))
-        gfx -= (4.0 * inv_dx * wt) * (gnC.transpose() @ gv)
-        val = wt * gnv + (4.0 * inv_dx * wt) * Cu
+        swg += wt * gv
+        val = wt * (gnv + 4.0 * inv_dx * Cu)
         if ti.static(atomic):
             gscratch[c, I[0], I[1], I[2]] += val
         else:
             gscratch[c, I[0], I[1], I[2]] = gscratch[c, I[0], I[1], I[2]] + val
+    gfx -= (4.0 * inv_dx) * (gnC.transpose() @ swg)
     xg[s, p] = gx1 + inv_dx * gfx
 
 
@@ -447,13 +465,6 @@ def copy_state(
 def copy_x(x: nd(), x2: nd(), src: ti.i32, dst: ti.i32, n: ti.i32):
     for p in range(n):
         x2[dst, p] = x[src, p]
-
-
-@ti.kernel
-def zero_CF_grad(Cg: nd(), Fg: nd(), s: ti.i32, n: ti.i32):
-    for p in range(n):
-        Cg[s, p] = ti.Matrix.zero(float, 3, 3)
-        Fg[s, p] = ti.Matrix.zero(float, 3, 3)
 
 
 @ti.kernel

@@ -165,6 +165,7 @@ class Simulator:
         self.adir = arr(v3, (n,))
         self.glued = arr(dt, (n,))
         self.act = arr(dt, (T, K.MAX_GROUPS), g)
+        self.actp = arr(dt, (n,), g)
         self.boxes = arr(dt, (K.MAX_BOXES, 6))
         self.bbox = arr(dt, (2, 3))
         self.stats = arr(dt, (2,))
@@ -243,10 +244,10 @@ class Simulator:
         b = np.minimum(b, np.array(self.dims))
         return (*a.tolist(), *b.tolist())
 
-    def _substep(self, s: int, t: int, r: tuple[int, ...]) -> None:
+    def _substep(self, s: int, t: int, r: tuple[int, ...], last: bool = False) -> None:
         sc, m = self.scene, self.mat
-        args = (self.x, self.v, self.C, self.F, self.A, self.phi, self.E, self.wact, self.adir,
-                self.act, self.scratch, s, t, self.n)
+        args = (self.x, self.v, self.C, self.F, self.A, self.phi, self.E, self.actp, self.adir,
+                self.scratch, s, self.n)
         consts = (sc.dx, m.dt, self.p_vol, m.density, m.nu, m.act_strength)
         if self.atomic:
             K.p2g_atomic(*args, *r, *consts)
@@ -254,12 +255,16 @@ class Simulator:
             K.p2g(*args, self.chunks, *r, *consts)
         K.grid_op(self.scratch, self.grid_m, self.grid_vin, self.grid_v, self.boxes, s,
                   self.chunks, *self.dims, *r, sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction)
-        K.g2p(self.x, self.v, self.C, self.grid_v, self.glued, s, self.n, *r, sc.dx, m.dt)
+        if not last:
+            K.g2p(self.x, self.v, self.C, self.grid_v, self.glued, s, self.n, *r, sc.dx, m.dt)
 
-    def _segment(self, t: int) -> None:
+    def _segment(self, t: int, replay: bool = False) -> None:
+        """The substeps of control step ``t``. A backward ``replay`` skips the last g2p: its
+        output is the next checkpoint, which the adjoint pass does not read."""
         r = self.regions[t]
+        K.actuation(self.wact, self.act, self.actp, t, self.n)
         for s in range(self.substeps):
-            self._substep(s, t, r)
+            self._substep(s, t, r, last=replay and s == self.substeps - 1)
 
     def _check(self, t: int) -> tuple[np.ndarray, np.ndarray, float]:
         """Fail loudly on NaN or on particles that outran the grid region; returns bounds."""
@@ -336,9 +341,10 @@ class Simulator:
             r = self.regions[t]
             K.copy_state(self.ck_x, self.ck_v, self.ck_C, self.ck_F, self.x, self.v, self.C,
                          self.F, t, 0, n)
-            self._segment(t)
+            self._segment(t, replay=True)
             if t < self.n_steps - 1:
                 K.copy_state(xg, vg, Cg, Fg, xg, vg, Cg, Fg, 0, S, n)
+            self.actp.grad.fill(0)
             for s in reversed(range(S)):
                 if self.atomic:
                     K.g2p_grad_atomic(self.x, self.grid_v, self.glued, xg, vg, Cg, self.gscratch,
@@ -350,11 +356,10 @@ class Simulator:
                                s, self.chunks, *self.dims, *r, sc.dx, m.dt, sc.gravity,
                                sc.ground_y, sc.friction)
                 K.p2g_grad(self.x, self.v, self.A, self.phi, self.ggrid, xg, vg, self.A.grad,
-                           self.phi.grad, s, n, *r, sc.dx, self.m_unit)
-                K.zero_CF_grad(Cg, Fg, s, n)
-                K.stress.grad(self.C, self.F, self.A, self.phi, self.E, self.wact, self.adir,
-                              self.act, s, t, n, sc.dx, m.dt, self.p_vol, m.density, m.nu,
-                              m.act_strength)
+                           self.phi.grad, Cg, Fg, s, n, *r, sc.dx, self.m_unit)
+                K.stress.grad(self.C, self.F, self.A, self.phi, self.E, self.actp, self.adir,
+                              s, n, sc.dx, m.dt, self.p_vol, m.density, m.nu, m.act_strength)
+            K.actuation.grad(self.wact, self.act, self.actp, t, n)
         return {
             "phi": self.phi.grad.to_numpy(),
             "E": self.E.grad.to_numpy(),
