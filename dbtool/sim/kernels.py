@@ -166,7 +166,8 @@ def p2g_atomic(
 @ti.kernel
 def p2g_grad(
     x: nd(), v: nd(), A: nd(), phi: nd(), ggrid: nd(), xg: nd(), vg: nd(), Ag: nd(), phig: nd(),
-    Cg: nd(), Fg: nd(), s: ti.i32, n: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
+    Cg: nd(), Fg: nd(), s: ti.i32, n: ti.i32,
+    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
     dx: float, m_unit: float,
 ):
     """Adjoint of the scatter in :func:`p2g`: gather node adjoints ``ggrid = (dL/d mv, dL/d m)``.
