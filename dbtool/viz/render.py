@@ -1,6 +1,6 @@
 """Motion montages and animations of a rollout (SPEC section 10: Figures 3, 5, 9).
 
-Headless: the Agg backend, never ``plt.show()``; files are written atomically.
+Headless: the Agg backend, nothing is shown on screen; files are written atomically.
 """
 
 from __future__ import annotations
