@@ -5,15 +5,17 @@ count, grid size or task (sizes are runtime arguments, never compile-time consta
 
 A substep is ``stress -> p2g -> grid_op -> g2p``:
 
-* ``stress`` (Taichi autodiff): deformation-gradient update and the APIC affine matrix
+* ``stress`` (inside ``p2g``): deformation-gradient update and the APIC affine matrix
   ``A = -dt V0 (4/dx^2) phi tau + m C`` with the compressible neo-Hookean Kirchhoff stress
   ``tau = mu (F F^T - I) + lam J (J - 1) I`` and the muscle term ``-a k F d d^T F^T`` along the
   particle's actuator direction ``d`` (positive ``a`` extends the material along ``d``),
   ``k = act_strength * E``.
 * ``p2g`` / ``g2p``: quadratic B-spline transfers. On the CPU the scatter runs in ``chunks``
   contiguous particle ranges, one per thread, each into its own copy of the grid with plain
-  (non-atomic) adds; ``grid_op`` sums the copies. Their gradients are written by hand
-  (``*_grad`` kernels): autodiff of the 27-node stencils is slow to compile and emits atomics.
+  (non-atomic) adds; ``grid_op`` sums the copies.
+* Gradients: the adjoints of the transfers and of the stress are written by hand (``*_grad``
+  kernels; ``p2g_grad`` holds the stress adjoint too): Taichi autodiff of the 27-node stencils
+  is slow to compile and emits atomics. Only the per-control-step ``actuation`` uses autodiff.
 * ``grid_op``: momentum to velocity, gravity, ground and box colliders with Coulomb friction,
   domain walls. Works on the active region ``[lo, hi)`` of the grid only.
 """
@@ -51,40 +53,73 @@ def _range(c, chunks, n):
     return c * n // chunks, (c + 1) * n // chunks
 
 
-# --------------------------------------------------------------------------- stress (autodiff)
+# --------------------------------------------------------------------------- stress
+@ti.func
+def _moduli(e, nu):
+    """Lame parameters of Young's modulus ``e`` and Poisson ratio ``nu``."""
+    return e / (2.0 * (1.0 + nu)), e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+
+
+@ti.func
+def _tau_unit(Fn, u, a, nu, act_strength):
+    """Kirchhoff stress per unit Young's modulus (``tau = E * tau_unit``): neo-Hookean plus
+    the muscle term along ``u = Fn d``."""
+    eye = ti.Matrix.identity(float, 3)
+    cm, cl = _moduli(1.0, nu)
+    J = Fn.determinant()
+    return cm * (Fn @ Fn.transpose() - eye) + (cl * J * (J - 1.0)) * eye \
+        - (a * act_strength) * u.outer_product(u)
+
+
 @ti.func
 def _stress(
-    C: ti.template(), F: ti.template(), A: ti.template(), phi: ti.template(), E: ti.template(),
+    C: ti.template(), F: ti.template(), phi: ti.template(), E: ti.template(),
     actp: ti.template(), adir: ti.template(), s, p, dx, dt, p_vol, p_rho, nu, act_strength,
 ):
-    """``F[s+1] = (I + dt C) F`` and the APIC affine matrix ``A[s]`` of particle ``p``."""
+    """``F[s+1] = (I + dt C) F`` and the APIC affine matrix of particle ``p`` at ``s``."""
     inv_dx = 1.0 / dx
-    eye = ti.Matrix.identity(float, 3)
-    Fn = (eye + dt * C[s, p]) @ F[s, p]
+    Cp = C[s, p]
+    Fn = (ti.Matrix.identity(float, 3) + dt * Cp) @ F[s, p]
     F[s + 1, p] = Fn
-    J = Fn.determinant()
-    e = E[p]
-    mu = e / (2.0 * (1.0 + nu))
-    lam = e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
-    a = actp[p]
-    Fd = Fn @ adir[p]
-    tau = mu * (Fn @ Fn.transpose() - eye) + (lam * J * (J - 1.0)) * eye
-    tau -= (a * act_strength * e) * Fd.outer_product(Fd)
+    tau = E[p] * _tau_unit(Fn, Fn @ adir[p], actp[p], nu, act_strength)
     ph = phi[p]
-    Ap = (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * tau + (p_rho * p_vol * ph) * C[s, p]
-    A[s, p] = Ap
-    return Ap
+    return (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * tau + (p_rho * p_vol * ph) * Cp
 
 
-@ti.kernel
-def stress(
-    C: nd(), F: nd(), A: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
-    s: ti.i32, n: ti.i32,
-    dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
-):
-    """Constitutive step alone; its Taichi-autodiff ``stress.grad`` is the backward pass."""
-    for p in range(n):
-        _stress(C, F, A, phi, E, actp, adir, s, p, dx, dt, p_vol, p_rho, nu, act_strength)
+@ti.func
+def _cofactor(M):
+    """Cofactor matrix, ``d det(M) / dM``."""
+    out = ti.Matrix.zero(float, 3, 3)
+    for i, j in ti.static(ti.ndrange(3, 3)):
+        i1, i2, j1, j2 = (i + 1) % 3, (i + 2) % 3, (j + 1) % 3, (j + 2) % 3
+        out[i, j] = M[i1, j1] * M[i2, j2] - M[i1, j2] * M[i2, j1]
+    return out
+
+
+@ti.func
+def _stress_vjp(Cp, Fp, e, a, d, ph, G, gFn, dx, dt, p_vol, p_rho, nu, act_strength):
+    """Adjoint of :func:`_stress` for the affine-matrix adjoint ``G`` and the ``F[s+1]``
+    adjoint ``gFn``. Returns the adjoints of ``C[s]``, ``F[s]``, ``phi``, ``E`` and ``a``."""
+    eye = ti.Matrix.identity(float, 3)
+    M = eye + dt * Cp
+    Fn = M @ Fp
+    u = Fn @ d
+    tu = _tau_unit(Fn, u, a, nu, act_strength)
+    alpha = -dt * p_vol * 4.0 / (dx * dx)
+    beta = p_rho * p_vol
+    H = (alpha * ph) * G  # d L / d tau
+    g_ph = (G * (alpha * e * tu + beta * Cp)).sum()
+    g_e = (H * tu).sum()
+    Hs = H + H.transpose()
+    Hu = Hs @ u
+    g_a = -0.5 * act_strength * e * u.dot(Hu)
+    mu, lam = _moduli(e, nu)
+    J = Fn.determinant()
+    gF = gFn + mu * (Hs @ Fn) + (lam * H.trace() * (2.0 * J - 1.0)) * _cofactor(Fn) \
+        - (a * act_strength * e) * Hu.outer_product(d)
+    g_C = (beta * ph) * G + dt * (gF @ Fp.transpose())
+    g_F = M.transpose() @ gF
+    return g_C, g_F, g_ph, g_e, g_a
 
 
 @ti.kernel
@@ -103,12 +138,11 @@ def actuation(wact: nd(), act: nd(), actp: nd(), t: ti.i32, n: ti.i32):
 # --------------------------------------------------------------------------- p2g
 @ti.func
 def _p2g_particle(
-    x: ti.template(), v: ti.template(), C: ti.template(), F: ti.template(), A: ti.template(),
-    phi: ti.template(), E: ti.template(), actp: ti.template(), adir: ti.template(),
-    scratch: ti.template(), s, p, c, lo, hi, dx, dt, p_vol, p_rho, nu,
-    act_strength, atomic: ti.template(),
+    x: ti.template(), v: ti.template(), C: ti.template(), F: ti.template(), phi: ti.template(),
+    E: ti.template(), actp: ti.template(), adir: ti.template(), scratch: ti.template(),
+    s, p, c, lo, hi, dx, dt, p_vol, p_rho, nu, act_strength, atomic: ti.template(),
 ):
-    Ap = _stress(C, F, A, phi, E, actp, adir, s, p, dx, dt, p_vol, p_rho, nu, act_strength)
+    Ap = _stress(C, F, phi, E, actp, adir, s, p, dx, dt, p_vol, p_rho, nu, act_strength)
     m_unit = p_rho * p_vol
     inv_dx = 1.0 / dx
     xp = x[s, p]
@@ -131,7 +165,7 @@ def _p2g_particle(
 
 @ti.kernel
 def p2g(
-    x: nd(), v: nd(), C: nd(), F: nd(), A: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
+    x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
     scratch: nd(), s: ti.i32, n: ti.i32, chunks: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
     dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
@@ -145,13 +179,13 @@ def p2g(
         c = q // SPREAD
         a, b = _range(c, chunks, n)
         for p in range(a, b):
-            _p2g_particle(x, v, C, F, A, phi, E, actp, adir, scratch, s, p, c, lo, hi,
+            _p2g_particle(x, v, C, F, phi, E, actp, adir, scratch, s, p, c, lo, hi,
                           dx, dt, p_vol, p_rho, nu, act_strength, False)
 
 
 @ti.kernel
 def p2g_atomic(
-    x: nd(), v: nd(), C: nd(), F: nd(), A: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
+    x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
     scratch: nd(), s: ti.i32, n: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
     dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
@@ -159,31 +193,41 @@ def p2g_atomic(
     """Massively parallel variant of :func:`p2g` (GPU): one grid copy, atomic adds."""
     lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
     for p in range(n):
-        _p2g_particle(x, v, C, F, A, phi, E, actp, adir, scratch, s, p, 0, lo, hi,
+        _p2g_particle(x, v, C, F, phi, E, actp, adir, scratch, s, p, 0, lo, hi,
                       dx, dt, p_vol, p_rho, nu, act_strength, True)
 
 
 @ti.kernel
 def p2g_grad(
-    x: nd(), v: nd(), A: nd(), phi: nd(), ggrid: nd(), xg: nd(), vg: nd(), Ag: nd(), phig: nd(),
-    Cg: nd(), Fg: nd(), s: ti.i32, n: ti.i32,
+    x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(), ggrid: nd(),
+    xg: nd(), vg: nd(), Cg: nd(), Fg: nd(), phig: nd(), Eg: nd(), actpg: nd(),
+    s: ti.i32, n: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
-    dx: float, m_unit: float,
+    dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
 ):
-    """Adjoint of the scatter in :func:`p2g`: gather node adjoints ``ggrid = (dL/d mv, dL/d m)``.
-
-    Also zeroes the ``C`` and ``F`` adjoints of substep ``s``, which ``stress.grad`` fills next.
-    """
+    """Adjoint of :func:`p2g` (scatter and stress): gather the node adjoints
+    ``ggrid = (dL/d mv, dL/d m)``, then the constitutive adjoint by hand. Writes the ``v``,
+    ``C`` and ``F`` adjoints of substep ``s``, adds to its ``x`` adjoint and accumulates the
+    ``phi``, ``E`` and muscle-signal adjoints."""
     lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
     for p in range(n):
         inv_dx = 1.0 / dx
+        m_unit = p_rho * p_vol
         xp = x[s, p]
         base = _base(xp, inv_dx, lo, hi)
         fx = xp * inv_dx - ti.cast(base, float)
         w, dw = _weights(fx)
-        m = m_unit * phi[p]
+        ph = phi[p]
+        e = E[p]
+        a = actp[p]
+        d = adir[p]
+        m = m_unit * ph
         vp = v[s, p]
-        Ap = A[s, p]
+        Cp = C[s, p]
+        Fp = F[s, p]
+        Fn = (ti.Matrix.identity(float, 3) + dt * Cp) @ Fp
+        tau = e * _tau_unit(Fn, Fn @ d, a, nu, act_strength)
+        Ap = (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * tau + (m_unit * ph) * Cp
         # dpos = (off - fx) dx, so A dpos = dx (A off - A fx) and every sum over the nodes of
         # something times dpos splits into a sum with the constant offsets and one with fx.
         Afx = Ap @ fx
@@ -211,10 +255,14 @@ def p2g_grad(
             gm += wt * gvv
         xg[s, p] = xg[s, p] + inv_dx * sc - Ap.transpose() @ sg
         vg[s, p] = m * sg
-        Ag[s, p] = dx * (sgo - sg.outer_product(fx))
-        phig[p] = phig[p] + m_unit * gm
-        Cg[s, p] = ti.Matrix.zero(float, 3, 3)
-        Fg[s, p] = ti.Matrix.zero(float, 3, 3)
+        G = dx * (sgo - sg.outer_product(fx))  # d L / d A
+        g_C, g_F, g_ph, g_e, g_a = _stress_vjp(Cp, Fp, e, a, d, ph, G, Fg[s + 1, p], dx, dt,
+                                               p_vol, p_rho, nu, act_strength)
+        Cg[s, p] = g_C
+        Fg[s, p] = g_F
+        phig[p] = phig[p] + m_unit * gm + g_ph
+        Eg[p] = Eg[p] + g_e
+        actpg[p] = actpg[p] + g_a
 
 
 # --------------------------------------------------------------------------- grid

@@ -149,7 +149,6 @@ class Simulator:
         self.v = arr(v3, (S + 1, n))
         self.C = arr(m3, (S + 1, n), g)
         self.F = arr(m3, (S + 1, n), g)
-        self.A = arr(m3, (S, n), g)
         ck = T + 1 if g else 1
         self.ck_x = arr(v3, (T + 1, n))
         self.ck_v, self.ck_C, self.ck_F = arr(v3, (ck, n)), arr(m3, (ck, n)), arr(m3, (ck, n))
@@ -246,7 +245,7 @@ class Simulator:
 
     def _substep(self, s: int, t: int, r: tuple[int, ...], last: bool = False) -> None:
         sc, m = self.scene, self.mat
-        args = (self.x, self.v, self.C, self.F, self.A, self.phi, self.E, self.actp, self.adir,
+        args = (self.x, self.v, self.C, self.F, self.phi, self.E, self.actp, self.adir,
                 self.scratch, s, self.n)
         consts = (sc.dx, m.dt, self.p_vol, m.density, m.nu, m.act_strength)
         if self.atomic:
@@ -355,10 +354,10 @@ class Simulator:
                 K.grid_op_grad(self.gscratch, self.grid_m, self.grid_vin, self.ggrid, self.boxes,
                                s, self.chunks, *self.dims, *r, sc.dx, m.dt, sc.gravity,
                                sc.ground_y, sc.friction)
-                K.p2g_grad(self.x, self.v, self.A, self.phi, self.ggrid, xg, vg, self.A.grad,
-                           self.phi.grad, Cg, Fg, s, n, *r, sc.dx, self.m_unit)
-                K.stress.grad(self.C, self.F, self.A, self.phi, self.E, self.actp, self.adir,
-                              s, n, sc.dx, m.dt, self.p_vol, m.density, m.nu, m.act_strength)
+                K.p2g_grad(self.x, self.v, self.C, self.F, self.phi, self.E, self.actp,
+                           self.adir, self.ggrid, xg, vg, Cg, Fg, self.phi.grad, self.E.grad,
+                           self.actp.grad, s, n, *r, sc.dx, m.dt, self.p_vol, m.density, m.nu,
+                           m.act_strength)
             K.actuation.grad(self.wact, self.act, self.actp, t, n)
         return {
             "phi": self.phi.grad.to_numpy(),
