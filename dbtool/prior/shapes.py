@@ -1,0 +1,379 @@
+"""Procedural, captioned corpus of soft-robot body shapes (SPEC section 1, the prior's data).
+
+Each family builds a watertight solid with manifold3d from random parameters; the surface is
+sampled with trimesh. Shapes are built z-up (manifold3d's extrusion axis) and turned to the
+simulator's y-up frame, then centred on their bounding box and scaled so the largest side is 1:
+every cloud lies in ``[-0.5, 0.5]^3``. Orientation is canonical (no random yaw): Chamfer-based
+metrics and the diffusion model both profit from it (``notes/prior-calibration.md``).
+
+Everything is deterministic given a seed: shape ``i`` of family ``f`` in split ``s`` uses the
+generator ``default_rng((seed, SPLITS[s], f, i))``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+from manifold3d import CrossSection, Manifold
+
+SEG = 24  # circular segments of spheres and cylinders
+SPLITS = {"train": 0, "reference": 1, "heldout": 2, "test": 3}
+
+Builder = Callable[[np.random.Generator], tuple[Manifold, list[str]]]
+
+
+# --------------------------------------------------------------------------- primitives
+def _box(sx: float, sy: float, sz: float, at=(0.0, 0.0, 0.0)) -> Manifold:
+    return Manifold.cube([sx, sy, sz], center=True).translate(list(at))
+
+
+def _ball(r: float, at=(0.0, 0.0, 0.0), scale=(1.0, 1.0, 1.0)) -> Manifold:
+    return Manifold.sphere(r, SEG).scale(list(scale)).translate(list(at))
+
+
+def _rod(a, b, r: float, r_end: float | None = None) -> Manifold:
+    """Cylinder (or frustum) from point ``a`` to point ``b``."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    d = b - a
+    h = float(np.linalg.norm(d))
+    cyl = Manifold.cylinder(h, r, r if r_end is None else r_end, SEG)
+    # rotate +z onto d: polar angle about y, then azimuth about z
+    theta = math.degrees(math.acos(max(-1.0, min(1.0, d[2] / h))))
+    phi = math.degrees(math.atan2(d[1], d[0]))
+    return cyl.rotate([0.0, theta, 0.0]).rotate([0.0, 0.0, phi]).translate(a.tolist())
+
+
+def _union(parts: list[Manifold]) -> Manifold:
+    out = parts[0]
+    for p in parts[1:]:
+        out = out + p
+    return out
+
+
+def _extrude(poly: np.ndarray, h: float) -> Manifold:
+    """Extrude a 2D polygon (xy, either winding) by ``h`` along z, centred on z = 0."""
+    x, y = poly[:, 0], poly[:, 1]
+    if np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)) < 0:  # clockwise: flip
+        poly = poly[::-1]
+    return Manifold.extrude(CrossSection([poly]), h).translate([0.0, 0.0, -h / 2])
+
+
+def _thick(rng: np.random.Generator, lo: float, hi: float) -> tuple[float, list[str]]:
+    """A thickness in ``[lo, hi]`` and its adjective when it is near an end."""
+    u = rng.uniform()
+    words = ["thin "] if u < 0.3 else ["thick "] if u > 0.7 else [""]
+    return lo + u * (hi - lo), words
+
+
+# --------------------------------------------------------------------------- families
+def ball(rng):
+    s = rng.uniform(0.9, 1.1, 3)
+    return _ball(0.5, scale=s), ["ball", "sphere", "round ball"]
+
+
+def egg(rng):
+    e = rng.uniform(1.5, 2.2)
+    return _ball(0.3, scale=(1.0, 1.0, e)), ["egg", "egg shape", "elongated ellipsoid"]
+
+
+def disk(rng):
+    h, w = _thick(rng, 0.08, 0.25)
+    return Manifold.cylinder(h, 0.5, 0.5, 40, True), [f"{w[0]}round disk", "disk", "coin"]
+
+
+def star(rng):
+    k = int(rng.integers(4, 7))
+    r_in = rng.uniform(0.15, 0.25)
+    ang = np.arange(2 * k) * math.pi / k + math.pi / 2
+    rad = np.where(np.arange(2 * k) % 2 == 0, 0.5, r_in)
+    poly = np.stack([rad * np.cos(ang), rad * np.sin(ang)], 1)
+    h = rng.uniform(0.1, 0.22)
+    words = {4: "four", 5: "five", 6: "six"}[k]
+    return _extrude(poly, h), ["star", f"star with {words} arms", f"{words}-pointed star"]
+
+
+def wings(rng):
+    span, chord = rng.uniform(0.35, 0.5), rng.uniform(0.2, 0.35)
+    tilt = rng.uniform(5, 25)
+    body = _ball(0.1, scale=(1.0, 1.6, 1.0))
+    parts = [body]
+    for side in (-1, 1):
+        poly = np.array([[0.0, -chord / 2], [span, -chord / 4], [span, chord / 4], [0.0, chord / 2]])
+        wing = _extrude(poly * [side, 1], 0.04).rotate([0.0, -side * tilt, 0.0])
+        parts.append(wing)
+    return _union(parts), ["pair of wings", "wings", "bird with spread wings"]
+
+
+def biped(rng):
+    r = rng.uniform(0.05, 0.08)
+    body = _ball(0.22, scale=(1.0, 0.7, 0.8))
+    parts = [body]
+    for side in (-1, 1):
+        parts.append(_rod((0.12 * side, 0, 0), (0.16 * side, 0.0, -0.45), r))
+    return _union(parts), ["body with two legs", "two-legged walker", "biped"]
+
+
+def quadruped(rng):
+    length, leg = rng.uniform(0.4, 0.55), rng.uniform(0.15, 0.3)
+    r = rng.uniform(0.04, 0.07)
+    body = _box(length, 0.22, 0.14)
+    parts = [body]
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            parts.append(_rod((sx * (length / 2 - r), sy * 0.08, 0), (sx * (length / 2 - r),
+                                                                       sy * 0.08, -0.07 - leg), r))
+    return _union(parts), ["body with four legs", "four-legged animal", "quadruped"]
+
+
+def hexapod(rng):
+    length, leg = rng.uniform(0.45, 0.6), rng.uniform(0.1, 0.18)
+    r = rng.uniform(0.03, 0.05)
+    parts = [_ball(0.5, scale=(length, 0.22, 0.14))]
+    for sx in (-1, 0, 1):
+        for sy in (-1, 1):
+            x = sx * length * 0.32
+            parts.append(_rod((x, sy * 0.08, 0), (x + sx * 0.05, sy * 0.28, -leg), r))
+    return _union(parts), ["body with six legs", "six-legged insect", "hexapod"]
+
+
+def tripod(rng):
+    leg, r = rng.uniform(0.5, 0.8), rng.uniform(0.03, 0.05)
+    spread = rng.uniform(0.3, 0.45)
+    parts = [_ball(0.12, scale=(1.0, 1.0, 0.7))]
+    for i in range(3):
+        a = 2 * math.pi * i / 3 + math.pi / 3
+        c, s = math.cos(a), math.sin(a)
+        parts.append(_rod((0.06 * c, 0.06 * s, 0.0), (spread * c, spread * s, -leg), r))
+    return _union(parts), ["tripod", "three-legged stand", "stand with three legs"]
+
+
+def table(rng):
+    t = rng.uniform(0.04, 0.08)
+    leg, r = rng.uniform(0.35, 0.6), rng.uniform(0.025, 0.045)
+    w = rng.uniform(0.7, 1.0)
+    parts = [_box(1.0, w, t)]
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            parts.append(_rod((sx * 0.42, sy * (w / 2 - 0.08), 0), (sx * 0.42, sy * (w / 2 - 0.08),
+                                                                   -leg), r))
+    return _union(parts), ["table", "table with four legs", "small table"]
+
+
+def bar(rng):
+    t, w = _thick(rng, 0.08, 0.2)
+    return _box(1.0, t, t), [f"{w[0]}bar", "rod", "long beam"]
+
+
+def plate(rng):
+    t, w = _thick(rng, 0.03, 0.12)
+    return _box(1.0, rng.uniform(0.7, 1.0), t), [f"{w[0]}plate", "flat plate", "slab"]
+
+
+def block(rng):
+    return _box(1.0, *rng.uniform(0.7, 1.0, 2)), ["block", "cube", "thick block"]
+
+
+def arch(rng):
+    r_out = 0.5
+    r_in = rng.uniform(0.28, 0.4)
+    depth = rng.uniform(0.15, 0.35)
+    ring = Manifold.cylinder(depth, r_out, r_out, 48, True) - Manifold.cylinder(
+        depth * 2, r_in, r_in, 48, True)
+    half = ring - _box(2.0, 2.0, 2.0, at=(0.0, -1.0, 0.0))
+    return half.rotate([90.0, 0.0, 0.0]), ["arch", "bridge", "arc"]
+
+
+def ring(rng):
+    R, r = 0.38, rng.uniform(0.06, 0.12)
+    torus = Manifold.revolve(CrossSection.circle(r, SEG).translate([R, 0.0]), 48)
+    return torus, ["ring", "donut", "torus"]
+
+
+def wedge(rng):
+    h = rng.uniform(0.3, 0.6)
+    poly = np.array([[-0.5, 0.0], [0.5, 0.0], [-0.5, h]])
+    w = rng.uniform(0.5, 0.9)
+    return _extrude(poly, w).rotate([90.0, 0.0, 0.0]), ["wedge", "ramp", "triangular prism"]
+
+
+def hook(rng):
+    r = rng.uniform(0.05, 0.08)
+    R = rng.uniform(0.2, 0.26)
+    shaft = _rod((0, 0, 0.5 - R), (0, 0, -0.2), r)
+    arc = Manifold.revolve(CrossSection.circle(r, SEG).translate([R, 0.0]), 48,
+                           rng.uniform(160, 220))
+    arc = arc.rotate([90.0, 0.0, 0.0]).translate([-R, 0.0, -0.2])
+    return shaft + arc, ["hook", "claw", "curved claw"]
+
+
+def finger(rng):
+    n = int(rng.integers(2, 4))
+    r0 = rng.uniform(0.09, 0.13)
+    parts, z = [], -0.5
+    seg = 1.0 / n
+    for i in range(n):
+        ra = r0 * (1 - 0.15 * i)
+        parts.append(_rod((0, 0, z), (0, 0, z + seg * 0.9), ra, ra * 0.9))
+        parts.append(_ball(ra * 0.95, at=(0, 0, z + seg * 0.9)))
+        z += seg
+    return _union(parts), ["finger", "soft finger", "gripper finger"]
+
+
+def cylinder(rng):
+    r = rng.uniform(0.15, 0.3)
+    return Manifold.cylinder(1.0, r, r, 40, True), ["cylinder", "pillar", "column"]
+
+
+def cone(rng):
+    r = rng.uniform(0.3, 0.5)
+    return Manifold.cylinder(1.0, r, 0.0, 40, True), ["cone", "pointed cone", "spike"]
+
+
+def cross(rng):
+    t = rng.uniform(0.18, 0.3)
+    h = rng.uniform(0.1, 0.2)
+    return _box(1.0, t, h) + _box(t, 1.0, h), ["cross", "plus sign", "cross shape"]
+
+
+def lshape(rng):
+    t = rng.uniform(0.2, 0.3)
+    h = rng.uniform(0.15, 0.3)
+    return _box(1.0, t, h, at=(0, -0.5 + t / 2, 0)) + _box(t, 1.0, h, at=(-0.5 + t / 2, 0, 0)), [
+        "L shape", "letter L", "L-shaped bracket"]
+
+
+def tshape(rng):
+    t = rng.uniform(0.2, 0.3)
+    h = rng.uniform(0.15, 0.3)
+    return _box(1.0, t, h, at=(0, 0.5 - t / 2, 0)) + _box(t, 1.0, h), [
+        "T shape", "letter T", "T-shaped beam"]
+
+
+def ushape(rng):
+    t = rng.uniform(0.18, 0.26)
+    h = rng.uniform(0.15, 0.3)
+    parts = [_box(1.0, t, h, at=(0, -0.5 + t / 2, 0)),
+             _box(t, 1.0, h, at=(-0.5 + t / 2, 0, 0)), _box(t, 1.0, h, at=(0.5 - t / 2, 0, 0))]
+    return _union(parts), ["U shape", "letter U", "horseshoe"]
+
+
+def blob(rng):
+    k = int(rng.integers(4, 8))
+    centres = rng.normal(0.0, 0.13, (k, 3))
+    radii = rng.uniform(0.12, 0.22, k)
+    return _union([_ball(r, at=c) for c, r in zip(centres, radii)]), [
+        "blob", "lumpy blob", "cluster of spheres"]
+
+
+def pyramid(rng):
+    h = rng.uniform(0.6, 1.0)
+    square = CrossSection.square([1.0, 1.0], True)
+    return Manifold.extrude(square, h, scale_top=(0.0, 0.0)), ["pyramid", "square pyramid",
+                                                                "pointed pyramid"]
+
+
+def dumbbell(rng):
+    r = rng.uniform(0.15, 0.22)
+    rb = rng.uniform(0.04, 0.08)
+    parts = [_ball(r, at=(-0.5 + r, 0, 0)), _ball(r, at=(0.5 - r, 0, 0)),
+             _rod((-0.5 + r, 0, 0), (0.5 - r, 0, 0), rb)]
+    return _union(parts), ["dumbbell", "two balls joined by a bar", "barbell"]
+
+
+def worm(rng):
+    k = int(rng.integers(6, 9))
+    amp = rng.uniform(0.05, 0.15)
+    xs = np.linspace(-0.42, 0.42, k)
+    r = rng.uniform(0.07, 0.1)
+    phase = rng.uniform(0, 2 * math.pi)
+    parts = [_ball(r, at=(x, amp * math.sin(4 * x + phase), 0)) for x in xs]
+    return _union(parts), ["worm", "caterpillar", "chain of beads"]
+
+
+FAMILIES: dict[str, Builder] = {
+    f.__name__: f for f in (
+        ball, egg, disk, star, wings, biped, quadruped, hexapod, tripod, table, bar, plate, block,
+        arch, ring, wedge, hook, finger, cylinder, cone, cross, lshape, tshape, ushape, blob,
+        pyramid, dumbbell, worm,
+    )
+}
+
+TEMPLATES = (
+    "{a} {n}",
+    "{a} {n} shaped robot",
+    "a soft robot shaped like {a} {n}",
+    "a 3D model of {a} {n}",
+    "{n}",
+)
+
+
+def captions(names: list[str]) -> list[str]:
+    """Every caption of a shape: each of its names in each template."""
+    out = []
+    for name in names:
+        name = name.strip()
+        art = "an" if name[0].lower() in "aeiou" else "a"
+        out += [tpl.format(a=art, n=name) for tpl in TEMPLATES]
+    return out
+
+
+# --------------------------------------------------------------------------- sampling
+@dataclass
+class Shape:
+    """One corpus item: family, captions and surface clouds in ``[-0.5, 0.5]^3`` (y up)."""
+
+    family: str
+    captions: list[str]
+    points: np.ndarray  # (n, 3) float32
+
+    @property
+    def caption(self) -> str:
+        return self.captions[0]
+
+
+def to_trimesh(solid: Manifold) -> trimesh.Trimesh:
+    mesh = solid.to_mesh()
+    return trimesh.Trimesh(np.asarray(mesh.vert_properties)[:, :3],
+                           np.asarray(mesh.tri_verts), process=False)
+
+
+def normalise(points: np.ndarray) -> np.ndarray:
+    """Centre on the bounding box and scale the largest side to 1."""
+    lo, hi = points.min(0), points.max(0)
+    return (points - (lo + hi) / 2) / max(float((hi - lo).max()), 1e-9)
+
+
+def make_shape(family: str, index: int, split: str = "train", seed: int = 0,
+               n_points: int = 1024) -> Shape:
+    """Shape ``index`` of ``family`` in ``split``: deterministic given the seed."""
+    if family not in FAMILIES:
+        raise ValueError(f"unknown shape family {family!r}")
+    rng = np.random.default_rng((seed, SPLITS[split], list(FAMILIES).index(family), index))
+    solid, names = FAMILIES[family](rng)
+    solid = solid.rotate([-90.0, 0.0, 0.0])  # z-up construction -> y-up
+    if solid.is_empty():
+        raise RuntimeError(f"shape family {family!r} built an empty solid")
+    mesh = to_trimesh(solid)
+    pts, _ = trimesh.sample.sample_surface(mesh, n_points, seed=int(rng.integers(2**31)))
+    pts = normalise(np.asarray(pts)).astype(np.float32)
+    return Shape(family, captions(names), pts)
+
+
+def make_corpus(per_family: int, split: str = "train", seed: int = 0, n_points: int = 1024,
+                families: list[str] | None = None, progress=None):
+    """Clouds ``(F * per_family, n, 3)``, family indices and per-shape caption lists."""
+    fams = families or list(FAMILIES)
+    clouds, labels, caps = [], [], []
+    for f in fams:
+        for i in range(per_family):
+            s = make_shape(f, i, split, seed, n_points)
+            clouds.append(s.points)
+            labels.append(list(FAMILIES).index(f))
+            caps.append(s.captions)
+            if progress is not None:
+                progress(1)
+    return np.stack(clouds), np.asarray(labels), caps

@@ -1,0 +1,226 @@
+"""Training of the prior's two models on the procedural corpus, with checkpoints and resume.
+
+The base model learns 1,024-point clouds conditioned on caption embeddings (cosine schedule,
+condition dropped with p = 0.1); the upsampler learns the other 3,072 points of a 4,096-point
+cloud given 1,024 of them (linear schedule, no text: the coarse cloud carries the shape). Each
+step trains on a random subset of ``subset`` points per cloud: the model's cost is linear in the
+points and a subset-trained model samples full clouds just as well
+(``notes/prior-calibration.md``). Mixed precision uses bfloat16 autocast (the CPU's AMX units).
+
+A run directory holds ``config.json``, ``manifest.json``, ``metrics.jsonl`` (the loss log) and
+``checkpoint.pt`` (model, EMA, optimiser, RNG states), written atomically every
+``ckpt_every`` steps; ``resume=True`` continues from it after an interruption.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from dbtool.prior import shapes, text
+from dbtool.prior.diffusion import SCALE, Diffusion
+from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
+
+COARSE = 1024
+FINE = 4096
+
+
+@dataclass
+class TrainConfig:
+    """Everything a training run depends on (written to ``config.json``)."""
+
+    kind: str = "base"  # "base" or "upsampler"
+    steps: int = 10000
+    batch: int = 32
+    subset: int = 256  # points per cloud per step (noised points for the upsampler)
+    lr: float = 1e-3
+    lr_min: float = 5e-5
+    warmup: int = 200
+    weight_decay: float = 0.01
+    ema: float = 0.999
+    per_family: int = 300  # training shapes per family
+    seed: int = 0
+    threads: int = 1
+    bf16: bool = True
+    ckpt_every: int = 250
+    log_every: int = 25
+    model: ModelConfig = field(default_factory=ModelConfig)
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("base", "upsampler"):
+            raise ValueError(f"unknown model kind {self.kind!r}: base or upsampler")
+        if isinstance(self.model, dict):
+            self.model = ModelConfig(**self.model)
+        self.model.coarse = self.kind == "upsampler"
+
+
+def atomic_save(obj, path: Path) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(obj, tmp)
+    os.replace(tmp, path)
+
+
+def load_corpus(cfg: TrainConfig, cache_dir: Path, progress=None):
+    """Training clouds (4,096 points, float16), family labels, caption table and, per shape,
+    the indices of its captions. Cached as ``.npz`` keyed by seed and size."""
+    path = cache_dir / f"corpus-seed{cfg.seed}-{cfg.per_family}x{len(shapes.FAMILIES)}.npz"
+    if path.exists():
+        d = np.load(path, allow_pickle=False)
+        caps = [str(c) for c in d["captions"]]
+        return d["clouds"], d["labels"], caps, list(d["cap_index"]), d["cap_count"]
+    clouds, labels, caps = shapes.make_corpus(cfg.per_family, "train", cfg.seed, FINE,
+                                              progress=progress)
+    table = sorted({c for cs in caps for c in cs})
+    pos = {c: i for i, c in enumerate(table)}
+    width = max(len(cs) for cs in caps)
+    cap_index = np.full((len(caps), width), -1, np.int32)
+    for i, cs in enumerate(caps):
+        cap_index[i, : len(cs)] = [pos[c] for c in cs]
+    cap_count = np.array([len(cs) for cs in caps], np.int32)
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez(tmp, clouds=clouds.astype(np.float16), labels=labels, captions=np.array(table),
+             cap_index=cap_index, cap_count=cap_count)
+    os.replace(tmp, path)
+    return clouds.astype(np.float16), labels, table, list(cap_index), cap_count
+
+
+def lr_at(cfg: TrainConfig, step: int) -> float:
+    """Linear warm-up, then cosine decay to ``lr_min``."""
+    if step < cfg.warmup:
+        return cfg.lr * (step + 1) / cfg.warmup
+    u = (step - cfg.warmup) / max(1, cfg.steps - cfg.warmup)
+    return cfg.lr_min + 0.5 * (cfg.lr - cfg.lr_min) * (1 + math.cos(math.pi * min(u, 1.0)))
+
+
+def make_batch(cfg: TrainConfig, clouds, cap_index, cap_count, emb, rng: np.random.Generator):
+    """(x0, cond, coarse) in model space for one step."""
+    idx = rng.integers(0, len(clouds), cfg.batch)
+    pts = clouds[idx].astype(np.float32)  # (B, 4096, 3)
+    perm = np.argsort(rng.random((cfg.batch, FINE)), axis=1)
+    if cfg.kind == "base":
+        x0 = np.take_along_axis(pts, perm[:, : cfg.subset, None], 1)
+        coarse = None
+        which = (rng.random(cfg.batch) * cap_count[idx]).astype(int)
+        cond = emb[np.array([cap_index[i][w] for i, w in zip(idx, which)])]
+    else:
+        coarse = torch.from_numpy(np.take_along_axis(pts, perm[:, :COARSE, None], 1) * SCALE)
+        x0 = np.take_along_axis(pts, perm[:, COARSE: COARSE + cfg.subset, None], 1)
+        cond = torch.zeros(cfg.batch, cfg.model.cond_dim)
+    return torch.from_numpy(x0 * SCALE), cond, coarse
+
+
+def diffusion_for(kind: str) -> Diffusion:
+    return Diffusion("cosine" if kind == "base" else "linear")
+
+
+def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path | None = None,
+          progress: bool = True) -> dict:
+    """Train (or resume) one model; returns the final metrics."""
+    from dbtool.runs import RunDir, write_json
+
+    torch.set_num_threads(max(1, cfg.threads))
+    ckpt_path = Path(run_dir) / "checkpoint.pt"
+    if ckpt_path.exists() and not resume:
+        raise FileExistsError(f"{ckpt_path} exists: pass --resume or choose another --out")
+    run = RunDir(run_dir, asdict(cfg), cfg.seed, "cpu")
+    clouds, _labels, table, cap_index, cap_count = load_corpus(
+        cfg, cache_dir or run.path.parent / "corpus")
+    emb = text.encode(table) if cfg.kind == "base" else None
+
+    torch.manual_seed(cfg.seed)
+    model = PointDiffusionTransformer(cfg.model)
+    ema = copy.deepcopy(model).requires_grad_(False)
+    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    rng = np.random.default_rng(cfg.seed)
+    gen = torch.Generator().manual_seed(cfg.seed)
+    start, elapsed = 0, 0.0
+    if ckpt_path.exists():
+        ck = torch.load(ckpt_path, weights_only=False)
+        model.load_state_dict(ck["model"])
+        ema.load_state_dict(ck["ema"])
+        opt.load_state_dict(ck["opt"])
+        rng.bit_generator.state = ck["rng"]
+        gen.set_state(ck["gen"])
+        start, elapsed = ck["step"], ck["elapsed"]
+    diff = diffusion_for(cfg.kind)
+
+    def save(step: int) -> None:
+        atomic_save({"model": model.state_dict(), "ema": ema.state_dict(),
+                     "opt": opt.state_dict(), "rng": rng.bit_generator.state,
+                     "gen": gen.get_state(), "step": step, "elapsed": elapsed,
+                     "config": asdict(cfg)}, ckpt_path)
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=cfg.steps, initial=start, desc=f"train {cfg.kind}", unit="step")
+    window: list[float] = []
+    t0 = time.perf_counter()
+    step = start
+    for step in range(start, cfg.steps):
+        for g in opt.param_groups:
+            g["lr"] = lr_at(cfg, step)
+        x0, cond, coarse = make_batch(cfg, clouds, cap_index, cap_count, emb, rng)
+
+        def net(x, t, c, coarse=coarse):
+            return model(x, t, c, coarse)
+
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=cfg.bf16):
+            loss = diff.loss(net, x0, cond, gen, p_uncond=0.1 if cfg.kind == "base" else 0.0)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+        opt.step()
+        decay = min(cfg.ema, (1 + step) / (10 + step))
+        with torch.no_grad():
+            for pe, pm in zip(ema.parameters(), model.parameters()):
+                pe.lerp_(pm, 1 - decay)
+        window.append(loss.item())
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(loss=f"{np.mean(window[-50:]):.4f}")
+        if (step + 1) % cfg.log_every == 0:
+            now = time.perf_counter()
+            elapsed += now - t0
+            t0 = now
+            run.log(step=step + 1, loss=float(np.mean(window)), lr=lr_at(cfg, step),
+                    elapsed_s=round(elapsed, 1))
+            window = []
+        if (step + 1) % cfg.ckpt_every == 0:
+            save(step + 1)
+    elapsed += time.perf_counter() - t0
+    save(cfg.steps)
+    if bar is not None:
+        bar.close()
+    result = {"steps": cfg.steps, "elapsed_s": elapsed}
+    write_json(run.path / "metrics.json", result)
+    return result
+
+
+def export_weights(checkpoint: Path, out: Path) -> Path:
+    """Write the EMA weights and the model config of a checkpoint as a shippable file."""
+    ck = torch.load(checkpoint, weights_only=False)
+    cfg = ck["config"]
+    state = {k: v.to(torch.float32) for k, v in ck["ema"].items()}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_save({"kind": cfg["kind"], "model": cfg["model"], "state": state,
+                 "steps": ck["step"], "train_seconds": ck["elapsed"],
+                 "train_config": cfg}, out)
+    return out
+
+
+def read_log(run_dir: Path) -> list[dict]:
+    path = Path(run_dir) / "metrics.jsonl"
+    if not path.exists():
+        return []
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
