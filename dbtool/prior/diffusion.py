@@ -137,9 +137,8 @@ class Diffusion:
     def sample(self, model: EpsModel, x_T: torch.Tensor, conds, steps: int = 64, **kw
                ) -> torch.Tensor:
         """Run :meth:`steps` to the end and return x_0 (model space)."""
-        for step in self.steps(model, x_T, conds, steps, **kw):
-            pass
-        return step.x
+        *_, last = self.steps(model, x_T, conds, steps, **kw)
+        return last.x
 
 
 def guided_eps(model: EpsModel, x: torch.Tensor, t: int,

@@ -102,7 +102,8 @@ def wings(rng):
     body = _ball(0.1, scale=(1.0, 1.6, 1.0))
     parts = [body]
     for side in (-1, 1):
-        poly = np.array([[0.0, -chord / 2], [span, -chord / 4], [span, chord / 4], [0.0, chord / 2]])
+        poly = np.array([[0.0, -chord / 2], [span, -chord / 4], [span, chord / 4],
+                         [0.0, chord / 2]])
         wing = _extrude(poly * [side, 1], 0.04).rotate([0.0, -side * tilt, 0.0])
         parts.append(wing)
     return _union(parts), ["pair of wings", "wings", "bird with spread wings"]
@@ -265,7 +266,7 @@ def blob(rng):
     k = int(rng.integers(4, 8))
     centres = rng.normal(0.0, 0.13, (k, 3))
     radii = rng.uniform(0.12, 0.22, k)
-    return _union([_ball(r, at=c) for c, r in zip(centres, radii)]), [
+    return _union([_ball(r, at=c) for c, r in zip(centres, radii, strict=True)]), [
         "blob", "lumpy blob", "cluster of spheres"]
 
 

@@ -43,7 +43,7 @@ def encode(prompts: list[str] | str) -> torch.Tensor:
     if todo:
         vecs = _model().encode(todo, convert_to_numpy=True, normalize_embeddings=True,
                                batch_size=64)
-        for p, v in zip(todo, vecs):
+        for p, v in zip(todo, vecs, strict=True):
             _STORE[p] = torch.as_tensor(v, dtype=torch.float32)
     return torch.stack([_STORE[p] for p in prompts])
 

@@ -110,7 +110,7 @@ def make_batch(cfg: TrainConfig, clouds, cap_index, cap_count, emb, rng: np.rand
         x0 = np.take_along_axis(pts, perm[:, : cfg.subset, None], 1)
         coarse = None
         which = (rng.random(cfg.batch) * cap_count[idx]).astype(int)
-        cond = emb[np.array([cap_index[i][w] for i, w in zip(idx, which)])]
+        cond = emb[np.array([cap_index[i][w] for i, w in zip(idx, which, strict=True)])]
     else:
         coarse = torch.from_numpy(np.take_along_axis(pts, perm[:, :COARSE, None], 1) * SCALE)
         x0 = np.take_along_axis(pts, perm[:, COARSE: COARSE + cfg.subset, None], 1)
@@ -183,7 +183,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path
         opt.step()
         decay = min(cfg.ema, (1 + step) / (10 + step))
         with torch.no_grad():
-            for pe, pm in zip(ema.parameters(), model.parameters()):
+            for pe, pm in zip(ema.parameters(), model.parameters(), strict=True):
                 pe.lerp_(pm, 1 - decay)
         window.append(loss.item())
         if bar is not None:
