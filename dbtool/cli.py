@@ -215,6 +215,109 @@ def export(
     typer.echo(f"report:  {out / d.task / 'report.json'}")
 
 
+@app.command()
+def generate(
+    prompts: list[str] = typer.Argument(..., help="one or more text prompts, e.g. \"a star\""),
+    n: int = typer.Option(8, "-n", min=1, help="samples per prompt"),
+    guidance: float = typer.Option(3.0, help="classifier-free guidance scale (Point-E uses 3)"),
+    steps: int = typer.Option(64, min=1, help="DDIM sampling steps"),
+    seed: int = typer.Option(0, help="seed of the initial noise"),
+    upsample: bool = typer.Option(False, "--upsample", help="densify to 4,096 points"),
+    base: Path = typer.Option(None, help="base model weights (default: the shipped ones)"),
+    out: Path = typer.Option(None, "-o", "--out", help="output folder (default "
+                                                      "runs/generate-TIME)"),
+) -> None:
+    """Sample point clouds from the prior: .ply per sample, samples.npz and grid.png."""
+    from dbtool.prior.generate import GenerateSettings
+    from dbtool.prior.generate import generate as run_generate
+    from dbtool.prior.pipeline import Prior
+
+    settings = GenerateSettings(n, guidance, steps, seed, upsample)
+    out = out or Path("runs") / f"generate-{time.strftime('%Y%m%d-%H%M%S')}"
+    try:
+        if any(not p.strip() for p in prompts):
+            raise ValueError("the prompt is empty: say what to generate, e.g. \"a star\"")
+        prior = Prior.load(base, with_upsampler=upsample)
+        summary = run_generate(prior, prompts, settings, out)
+    except (ValueError, RuntimeError) as exc:
+        _fail(str(exc))
+    typer.echo(f"{len(prompts) * n} clouds of {summary['points']} points in "
+               f"{summary['seconds']:.1f} s -> {out}")
+    typer.echo(f"grid: {out / 'grid.png'}")
+
+
+prior_app = typer.Typer(no_args_is_help=True, help="Train, export and evaluate the prior.")
+app.add_typer(prior_app, name="prior")
+
+
+@prior_app.command("train")
+def prior_train(
+    kind: str = typer.Option("base", help="base (text -> 1,024 points) or upsampler"),
+    steps: int = typer.Option(None, min=1, help="training steps (default: the shipped preset)"),
+    out: Path = typer.Option(None, help="run directory (default runs/prior/KIND)"),
+    resume: bool = typer.Option(False, "--resume", help="continue from OUT/checkpoint.pt"),
+    threads: int = typer.Option(None, min=1, help="torch threads (default 1)"),
+    seed: int = typer.Option(None, help="seed (default 0)"),
+) -> None:
+    """Train a model of the prior on the procedural corpus; checkpoints and resumes."""
+    from dbtool.prior.train import preset, resumed_config, train
+
+    out = out or Path("runs") / "prior" / kind
+    try:
+        if resume:
+            cfg = resumed_config(out, steps)
+            if threads:
+                cfg.threads = threads
+        else:
+            cfg = preset(kind, steps=steps, threads=threads, seed=seed)
+        result = train(cfg, out, resume=resume, cache_dir=out.parent / "corpus")
+    except (ValueError, FileExistsError, FileNotFoundError) as exc:
+        _fail(str(exc))
+    typer.echo(f"trained {cfg.kind} for {result['steps']} steps ({result['elapsed_s']:.0f} s) "
+               f"-> {out / 'checkpoint.pt'}")
+
+
+@prior_app.command("export")
+def prior_export(
+    run_dir: Path = typer.Argument(..., help="a training run directory"),
+    out: Path = typer.Option(..., "-o", "--out", help="weights file to write"),
+) -> None:
+    """Write a training run's EMA weights as a shippable weights file."""
+    from dbtool.prior.pipeline import load_model
+    from dbtool.prior.train import export_weights
+
+    try:
+        load_model(run_dir / "checkpoint.pt")  # validates the checkpoint first
+        path = export_weights(run_dir / "checkpoint.pt", out)
+    except ValueError as exc:
+        _fail(str(exc))
+    typer.echo(f"wrote {path}")
+
+
+@prior_app.command("evaluate")
+def prior_evaluate(
+    base: Path = typer.Option(None, help="base model weights (default: the shipped ones)"),
+    samples: int = typer.Option(16, min=1, help="samples per family"),
+    steps: int = typer.Option(64, min=1, help="DDIM steps"),
+    guidance: float = typer.Option(3.0, help="guidance scale"),
+    families: list[str] = typer.Option(None, "--family", help="only these families"),
+    out: Path = typer.Option(Path("runs/prior/eval.json"), help="metrics JSON"),
+) -> None:
+    """Prompt fidelity (1-NN Chamfer), its ceiling, paraphrases, diversity, interpolation."""
+    from dbtool.prior.evaluate import evaluate
+    from dbtool.prior.pipeline import Prior
+    from dbtool.runs import write_json
+
+    try:
+        prior = Prior.load(base, with_upsampler=False)
+        res = evaluate(prior, families or None, samples, steps, guidance, progress=typer.echo)
+    except (ValueError, KeyError) as exc:
+        _fail(str(exc))
+    write_json(out, res)
+    typer.echo(f"accuracy {res['accuracy']:.3f} (lowest family {res['min_accuracy']:.2f}, "
+               f"ceiling {res['ceiling']:.3f}) -> {out}")
+
+
 def main() -> None:  # pragma: no cover
     app()
 

@@ -62,6 +62,36 @@ class TrainConfig:
         self.model.coarse = self.kind == "upsampler"
 
 
+def preset(kind: str, **overrides) -> TrainConfig:
+    """The configuration the shipped weights were trained with (``MODEL_CARD.md``)."""
+    if kind == "base":
+        cfg = TrainConfig(kind="base", steps=14000, batch=32, subset=256, ckpt_every=500,
+                          model=ModelConfig(depth=6))
+    elif kind == "upsampler":
+        cfg = TrainConfig(kind="upsampler", steps=4000, batch=16, subset=256, ckpt_every=250)
+    else:
+        raise ValueError(f"unknown model kind {kind!r}: base or upsampler")
+    for key, value in overrides.items():
+        if value is not None:
+            setattr(cfg, key, value)
+    return cfg
+
+
+def resumed_config(run_dir: Path, steps: int | None = None) -> TrainConfig:
+    """The configuration saved in ``run_dir/checkpoint.pt`` (optionally with more steps)."""
+    ckpt_path = Path(run_dir) / "checkpoint.pt"
+    if not ckpt_path.is_file():
+        raise FileNotFoundError(f"nothing to resume: {ckpt_path} does not exist")
+    try:
+        saved = torch.load(ckpt_path, weights_only=False, map_location="cpu")["config"]
+    except Exception as exc:  # noqa: BLE001 - any unreadable checkpoint gets one message
+        raise ValueError(f"not a readable training checkpoint: {ckpt_path}") from exc
+    cfg = TrainConfig(**saved)
+    if steps is not None:
+        cfg.steps = steps
+    return cfg
+
+
 def atomic_save(obj, path: Path) -> None:
     tmp = path.with_name(path.name + ".tmp")
     torch.save(obj, tmp)

@@ -1,0 +1,139 @@
+"""Evaluation of a prior: prompt fidelity, its ceiling, paraphrases, diversity, interpolation.
+
+Used for ``MODEL_CARD.md`` (``dbtool prior evaluate``) and, on a subset, by the
+tests. Reference shapes come from the corpus's ``reference`` split and the ceiling from its
+``heldout`` split: neither is ever trained on (training uses the ``train`` split).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import torch
+
+from dbtool.prior import shapes
+from dbtool.prior.metrics import chamfer_matrix, one_nn_accuracy, one_nna, spread, subsample
+from dbtool.prior.pipeline import Prior
+
+REF_PER_FAMILY = 32
+HELDOUT_PER_FAMILY = 16
+METRIC_POINTS = 512
+
+# Captions phrased unlike the training templates, with the families that count as right.
+PARAPHRASES: dict[str, tuple[str, ...]] = {
+    "a five-pointed star": ("star",),
+    "a spherical blob": ("ball", "blob"),
+    "something with four legs": ("quadruped", "table"),
+    "a doughnut": ("ring",),
+    "a flat square sheet": ("plate",),
+    "a long thin stick": ("bar", "cylinder"),
+    "a creature with six legs": ("hexapod",),
+    "a tall column": ("cylinder",),
+    "a robot that looks like a letter U": ("ushape",),
+    "a crab claw": ("hook",),
+}
+INTERPOLATIONS = (("a ball", "a star"), ("a bar", "a ring"), ("a table", "a pyramid"))
+
+
+def real_set(split: str, per_family: int, families: list[str], seed: int = 0
+             ) -> tuple[torch.Tensor, np.ndarray]:
+    clouds, labels, _ = shapes.make_corpus(per_family, split, seed, 1024, families)
+    return subsample(clouds, METRIC_POINTS, seed=1), labels
+
+
+def family_index(name: str) -> int:
+    return list(shapes.FAMILIES).index(name)
+
+
+def prompt_of(family: str) -> str:
+    """The caption a family is prompted with (its first name, first template)."""
+    return shapes.make_shape(family, 0, "test", n_points=16).captions[0]
+
+
+def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
+             steps: int = 64, guidance: float = 3.0, seed: int = 0, paraphrases: bool = True,
+             interpolate: bool = True, progress=print) -> dict:
+    """All quality metrics of the issue; numbers per family and overall."""
+    fams = families or list(shapes.FAMILIES)
+    t0 = time.perf_counter()
+    ref, ref_lab = real_set("reference", REF_PER_FAMILY, fams)
+    held, held_lab = real_set("heldout", HELDOUT_PER_FAMILY, fams)
+    ceiling = one_nn_accuracy(chamfer_matrix(held, ref), held_lab, ref_lab)
+    res: dict = {"families": {}, "settings": {
+        "samples": samples, "steps": steps, "guidance": guidance, "seed": seed,
+        "reference_per_family": REF_PER_FAMILY, "heldout_per_family": HELDOUT_PER_FAMILY,
+        "metric_points": METRIC_POINTS}}
+    accs = []
+    for k, fam in enumerate(fams):
+        prompt = prompt_of(fam)
+        gen = prior.sample(prompt, samples, guidance, steps, seed + k).clouds
+        g = subsample(gen, METRIC_POINTS, seed=2)
+        acc = one_nn_accuracy(chamfer_matrix(g, ref), np.full(samples, family_index(fam)),
+                              ref_lab)
+        real = held[held_lab == family_index(fam)]
+        res["families"][fam] = {
+            "prompt": prompt, "accuracy": float(acc.mean()),
+            "ceiling": float(ceiling[held_lab == family_index(fam)].mean()),
+            "one_nna": one_nna(g, real), "spread_ratio": spread(g) / max(spread(real), 1e-12),
+            "extent_ratio": float(np.ptp(gen, 1).max(1).mean()),
+        }
+        accs.append(acc.mean())
+        if progress:
+            progress(f"{fam:10s} acc {acc.mean():.2f}  ceiling "
+                     f"{res['families'][fam]['ceiling']:.2f}  1-NNA "
+                     f"{res['families'][fam]['one_nna']:.2f}")
+    res["accuracy"] = float(np.mean(accs))
+    res["min_accuracy"] = float(np.min(accs))
+    res["ceiling"] = float(ceiling.mean())
+    if paraphrases:
+        para = {}
+        for i, (prompt, ok) in enumerate(PARAPHRASES.items()):
+            if not set(ok) <= set(fams):
+                continue
+            g = subsample(prior.sample(prompt, samples, guidance, steps, seed + 100 + i).clouds,
+                          METRIC_POINTS, seed=2)
+            nn = ref_lab[chamfer_matrix(g, ref).argmin(1).numpy()]
+            hit = np.isin(nn, [family_index(f) for f in ok])
+            para[prompt] = {"families": list(ok), "accuracy": float(hit.mean())}
+            if progress:
+                progress(f"{prompt!r}: {hit.mean():.2f}")
+        res["paraphrases"] = para
+        res["paraphrase_accuracy"] = float(np.mean([p["accuracy"] for p in para.values()]))
+    if interpolate:
+        res["interpolations"] = [interpolation(prior, a, b, ref, ref_lab, steps, guidance, seed)
+                                 for a, b in INTERPOLATIONS
+                                 if {_fam_of(a), _fam_of(b)} <= set(fams)]
+    res["seconds"] = time.perf_counter() - t0
+    return res
+
+
+def _fam_of(prompt: str) -> str:
+    for fam in shapes.FAMILIES:
+        if prompt_of(fam) == prompt:
+            return fam
+    raise KeyError(prompt)
+
+
+def slerp(a: torch.Tensor, b: torch.Tensor, u: float) -> torch.Tensor:
+    """Spherical interpolation of unit embeddings."""
+    om = torch.arccos((a * b).sum().clamp(-1, 1))
+    if om < 1e-6:
+        return a
+    return (torch.sin((1 - u) * om) * a + torch.sin(u * om) * b) / torch.sin(om)
+
+
+def interpolation(prior: Prior, a: str, b: str, ref, ref_lab, steps: int, guidance: float,
+                  seed: int, n: int = 7, samples: int = 8) -> dict:
+    """Share of samples whose nearest reference is family A or B along the slerp A -> B."""
+    ea, eb = prior.embed([a, b])
+    fa, fb = family_index(_fam_of(a)), family_index(_fam_of(b))
+    rows = []
+    for u in np.linspace(0, 1, n):
+        e = slerp(ea, eb, float(u))
+        g = subsample(prior.sample(embedding=e, n=samples, guidance=guidance, steps=steps,
+                                   seed=seed).clouds, METRIC_POINTS, seed=2)
+        nn = ref_lab[chamfer_matrix(g, ref).argmin(1).numpy()]
+        rows.append({"u": float(u), "share_a": float((nn == fa).mean()),
+                     "share_b": float((nn == fb).mean())})
+    return {"a": a, "b": b, "path": rows}

@@ -1,0 +1,65 @@
+"""Quality metrics of the prior: Chamfer distance, 1-NN family accuracy, 1-NNA diversity.
+
+* Prompt fidelity (issue acceptance): a generated cloud is correct when its single nearest
+  reference shape (Chamfer) belongs to the prompted family. The same rule applied to real
+  held-out shapes is the metric's ceiling. (A mean-distance-to-family rule is a poor judge:
+  ``notes/prior-calibration.md``.)
+* Diversity: the 1-nearest-neighbour two-sample accuracy (1-NNA) of generated vs held-out real
+  shapes of one family: 0.5 means indistinguishable sets, 1.0 fully separable (collapse or a
+  systematic bias); plus the spread (mean pairwise Chamfer) of generated vs real clouds.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+
+def subsample(clouds: np.ndarray, n: int, seed: int = 0) -> torch.Tensor:
+    """The first ``n`` points of a fixed random permutation of each cloud."""
+    clouds = np.asarray(clouds, np.float32)
+    if clouds.shape[1] <= n:
+        return torch.from_numpy(clouds)
+    rng = np.random.default_rng(seed)
+    idx = np.stack([rng.permutation(clouds.shape[1])[:n] for _ in range(len(clouds))])
+    return torch.from_numpy(np.take_along_axis(clouds, idx[..., None], 1))
+
+
+def chamfer_matrix(a: torch.Tensor, b: torch.Tensor, max_pairs: int = 96) -> torch.Tensor:
+    """Symmetric Chamfer distance (mean squared nearest-neighbour distance, both ways) between
+    every cloud of ``a`` (A, N, 3) and every cloud of ``b`` (B, M, 3): ``(A, B)``. Works on
+    ``max_pairs`` cloud pairs at a time to bound memory."""
+    out = torch.empty(a.shape[0], b.shape[0])
+    bb = (b * b).sum(-1)  # (B, M)
+    with torch.no_grad():
+        for i in range(a.shape[0]):
+            ai = a[i]
+            aa = (ai * ai).sum(-1)  # (N,)
+            for j in range(0, b.shape[0], max_pairs):
+                bj = b[j: j + max_pairs]
+                d = (aa[None, :, None] + bb[j: j + max_pairs, None, :]
+                     - 2 * torch.einsum("nd,bmd->bnm", ai, bj)).clamp(min=0)
+                out[i, j: j + max_pairs] = d.min(2).values.mean(1) + d.min(1).values.mean(1)
+    return out
+
+
+def one_nn_accuracy(dist: torch.Tensor, true: np.ndarray, ref_labels: np.ndarray) -> np.ndarray:
+    """Per query: 1 when its nearest reference has the query's label."""
+    nn = dist.argmin(1).numpy()
+    return (np.asarray(ref_labels)[nn] == np.asarray(true)).astype(float)
+
+
+def one_nna(gen: torch.Tensor, real: torch.Tensor) -> float:
+    """1-NN two-sample accuracy of two sets (leave-one-out); 0.5 is ideal."""
+    both = torch.cat([gen, real])
+    d = chamfer_matrix(both, both)
+    d.fill_diagonal_(float("inf"))
+    lab = np.r_[np.zeros(len(gen)), np.ones(len(real))]
+    return float((lab[d.argmin(1).numpy()] == lab).mean())
+
+
+def spread(clouds: torch.Tensor) -> float:
+    """Mean pairwise Chamfer distance within a set (0 = all identical)."""
+    d = chamfer_matrix(clouds, clouds)
+    n = len(clouds)
+    return float(d.sum() / max(n * (n - 1), 1))

@@ -1,0 +1,173 @@
+"""The prior as one object: shipped weights, prompts -> point clouds, intermediate x_t.
+
+:class:`Prior` keeps the model, its schedule and the text encoder apart (diffusers-style) and
+is the only thing the co-design code talks to. Any backbone with the call signature
+``eps = backbone(x_t, t, cond)`` (clouds ``(B, N, 3)`` in model space, integer timesteps,
+``(B, 384)`` conditions) can replace the shipped transformer, e.g. a GPU-trained model or real
+Point-E weights behind an adapter: pass it as ``Prior(base=...)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from dbtool.prior import text
+from dbtool.prior.diffusion import SCALE, Diffusion, EpsModel, Step
+from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
+
+WEIGHTS = Path(__file__).parent / "weights"
+BASE_WEIGHTS = WEIGHTS / "base.pt"
+UPSAMPLER_WEIGHTS = WEIGHTS / "upsampler.pt"
+COARSE_POINTS = 1024
+FINE_POINTS = 4096
+MAX_GUIDANCE = 50.0
+
+
+class CheckpointError(ValueError):
+    """A weights file is missing or is not a dbtool prior checkpoint."""
+
+
+def load_model(path: str | Path) -> tuple[PointDiffusionTransformer, dict]:
+    """A model and its metadata from a file written by :func:`~dbtool.prior.train.export_weights`
+    (or a training ``checkpoint.pt``, whose EMA weights are used)."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"checkpoint not found: {path}")
+    try:
+        ck = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as exc:  # noqa: BLE001 - any unreadable file gets the same one-line error
+        raise CheckpointError(f"not a readable checkpoint: {path} ({exc.__class__.__name__})"
+                              ) from exc
+    if not isinstance(ck, dict) or not ({"state", "model"} <= ck.keys()
+                                        or {"ema", "config"} <= ck.keys()):
+        raise CheckpointError(f"not a dbtool prior checkpoint: {path}")
+    if "ema" in ck:  # training checkpoint
+        meta = {"kind": ck["config"]["kind"], "model": ck["config"]["model"],
+                "steps": ck["step"], "train_seconds": ck["elapsed"]}
+        state = ck["ema"]
+    else:
+        meta, state = {k: v for k, v in ck.items() if k != "state"}, ck["state"]
+    model = PointDiffusionTransformer(ModelConfig(**meta["model"]))
+    model.load_state_dict(state)
+    model.eval().requires_grad_(False)
+    return model, meta
+
+
+@dataclass
+class Samples:
+    """Generated clouds in ``[-0.5, 0.5]^3`` (y up) and, on request, x_t at chosen t."""
+
+    clouds: np.ndarray  # (n, points, 3)
+    intermediates: dict[int, np.ndarray] = field(default_factory=dict)  # t -> (n, points, 3)
+    fine: np.ndarray | None = None  # upsampled (n, 4096, 3)
+
+
+class Prior:
+    """Text/embedding-conditioned point-cloud diffusion with an optional upsampler."""
+
+    def __init__(self, base: EpsModel, upsampler: PointDiffusionTransformer | None = None,
+                 bf16: bool = True) -> None:
+        self.base, self.upsampler, self.bf16 = base, upsampler, bf16
+        self.diffusion = Diffusion("cosine")
+        self.up_diffusion = Diffusion("linear")
+
+    @classmethod
+    def load(cls, base: str | Path | None = None, upsampler: str | Path | None = None,
+             with_upsampler: bool = True) -> Prior:
+        """The shipped weights (default) or the given files."""
+        model, _ = load_model(base or BASE_WEIGHTS)
+        up = None
+        if with_upsampler or upsampler is not None:
+            up_path = Path(upsampler or UPSAMPLER_WEIGHTS)
+            if upsampler is not None or up_path.is_file():
+                up, _ = load_model(up_path)
+        return cls(model, up)
+
+    # ------------------------------------------------------------------ conditions
+    @staticmethod
+    def embed(prompts: Sequence[str] | str) -> torch.Tensor:
+        """Prompt embeddings (the conditioning space), shape ``(len, 384)``."""
+        return text.encode(list(prompts) if not isinstance(prompts, str) else [prompts])
+
+    def eps(self, x: torch.Tensor, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+        """The base model's epsilon (bfloat16 autocast on the CPU when ``bf16``)."""
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=self.bf16):
+            return self.base(x, t, cond).float()
+
+    # ------------------------------------------------------------------ sampling
+    def sampler(self, conds: Sequence[tuple[torch.Tensor, float]], n: int, steps: int = 64,
+                seed: int = 0, points: int = COARSE_POINTS, include: Sequence[int] = (),
+                t_start: int | None = None, x_T: torch.Tensor | None = None, eta: float = 0.0,
+                ) -> Iterator[Step]:
+        """The base sampler as a generator of :class:`Step` (model space, see
+        :meth:`Diffusion.steps`); the caller may replace ``step.x`` between updates."""
+        for c, s in conds:
+            if not np.isfinite(s) or abs(s) > MAX_GUIDANCE:
+                raise ValueError(f"guidance scale {s} is outside [-{MAX_GUIDANCE}, "
+                                 f"{MAX_GUIDANCE}]")
+            if c.dim() != 2 or c.shape[-1] != text.DIM:
+                raise ValueError(f"a condition must have shape (1 or n, {text.DIM})")
+        gen = torch.Generator().manual_seed(seed)
+        if x_T is None:
+            x_T = torch.randn((n, points, 3), generator=gen)
+        return self.diffusion.steps(self.eps, x_T, conds, steps, t_start, include, eta, gen)
+
+    def sample(self, prompts: Sequence[str] | str | None = None, n: int = 1,
+               guidance: float = 3.0, steps: int = 64, seed: int = 0,
+               embedding: torch.Tensor | None = None, extra: Sequence[tuple[str | torch.Tensor,
+               float]] = (), return_at: Sequence[int] = (), upsample: bool = False,
+               points: int = COARSE_POINTS) -> Samples:
+        """``n`` clouds per prompt (or for ``embedding``), classifier-free guided.
+
+        ``extra`` adds composed guidance terms ``(prompt or embedding, scale)`` (SPEC 6);
+        ``return_at`` lists timesteps whose x_t is returned (they join the sampler's grid)."""
+        conds: list[tuple[torch.Tensor, float]] = []
+        if embedding is not None:
+            conds.append((embedding.reshape(1, -1).float(), guidance))
+        elif prompts is not None:
+            plist = [prompts] if isinstance(prompts, str) else list(prompts)
+            emb = self.embed(plist).repeat_interleave(n, 0)
+            conds.append((emb, guidance))
+            n = n * len(plist)
+        else:
+            raise ValueError("give a prompt or an embedding")
+        for c, s in extra:
+            conds.append((self.embed(c) if isinstance(c, str) else c.reshape(1, -1), s))
+        inter: dict[int, np.ndarray] = {}
+        wanted = {int(t) for t in return_at}
+        last = None
+        for step in self.sampler(conds, n, steps, seed, points, include=sorted(wanted)):
+            if step.t in wanted:
+                inter[step.t] = step.x.numpy() / SCALE
+            last = step
+        clouds = last.x.numpy() / SCALE
+        if 0 in wanted:
+            inter[0] = clouds
+        out = Samples(clouds, inter)
+        if upsample:
+            out.fine = self.upsample(clouds, seed=seed)
+        return out
+
+    def upsample(self, coarse: np.ndarray, steps: int = 32, seed: int = 0) -> np.ndarray:
+        """Densify ``(n, 1024, 3)`` clouds to ``(n, 4096, 3)``: the coarse points plus 3,072
+        new ones sampled from the upsampler."""
+        if self.upsampler is None:
+            raise RuntimeError("no upsampler weights loaded")
+        c = torch.as_tensor(np.asarray(coarse, np.float32)) * SCALE
+        n = c.shape[0]
+        gen = torch.Generator().manual_seed(seed + 1)
+        x_T = torch.randn((n, FINE_POINTS - c.shape[1], 3), generator=gen)
+        null = torch.zeros(1, text.DIM)
+
+        def eps(x, t, cond):
+            reps = x.shape[0] // n
+            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=self.bf16):
+                return self.upsampler(x, t, cond, c.repeat(reps, 1, 1)).float()
+
+        fine = self.up_diffusion.sample(eps, x_T, [(null, 1.0)], steps, generator=gen)
+        return np.concatenate([coarse, fine.numpy() / SCALE], 1)

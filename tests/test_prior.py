@@ -1,0 +1,206 @@
+"""The generative prior: schedule, q_sample, loss, guidance, samplers, checkpoints, network."""
+
+import numpy as np
+import pytest
+import torch
+
+from dbtool.prior import shapes, text
+from dbtool.prior.diffusion import Diffusion, guided_eps
+from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
+from dbtool.prior.pipeline import CheckpointError, Prior, load_model
+from dbtool.prior.train import TrainConfig, export_weights, resumed_config, train
+
+TINY = dict(width=32, heads=2, latents=8, depth=1, decoder_layers=1)
+
+
+def tiny_model(seed: int = 0, **kw) -> PointDiffusionTransformer:
+    torch.manual_seed(seed)
+    m = PointDiffusionTransformer(ModelConfig(**{**TINY, **kw}))
+    with torch.no_grad():  # a non-zero output layer, so outputs depend on the inputs
+        m.out.weight.normal_(0, 0.5)
+    return m.eval()
+
+
+# ---------------------------------------------------------------------------- schedule
+@pytest.mark.parametrize("schedule", ["cosine", "linear"])
+def test_schedule_identities(schedule):
+    d = Diffusion(schedule)
+    assert d.abar.shape == (1024,) and d.betas.shape == (1024,)
+    assert torch.all(d.betas > 0) and torch.all(d.betas <= 0.999)
+    assert torch.all(d.abar[1:] < d.abar[:-1])  # strictly decreasing
+    assert torch.allclose(torch.cumprod(1 - d.betas.double(), 0).float(), d.abar, atol=1e-6)
+    assert d.abar[0] > 0.99 and d.abar[-1] < 1e-3
+
+
+def test_cosine_schedule_matches_its_closed_form():
+    d = Diffusion("cosine")
+    s, T = 0.008, 1024
+    f = lambda t: np.cos((t / T + s) / (1 + s) * np.pi / 2) ** 2  # noqa: E731
+    for t in (0, 100, 512, 900):
+        assert d.abar[t].item() == pytest.approx(f(t + 1) / f(0), rel=1e-4)
+
+
+def test_q_sample_statistics():
+    d = Diffusion("cosine")
+    x0 = torch.tensor([[[0.8, -0.3, 0.1]]]).expand(20000, 1, 3)
+    g = torch.Generator().manual_seed(0)
+    for t in (50, 400, 900):
+        xt = d.q_sample(x0, torch.full((20000,), t), torch.randn(x0.shape, generator=g))
+        a = d.abar[t]
+        assert torch.allclose(xt.mean(0), a.sqrt() * x0[0], atol=0.02)
+        assert torch.allclose(xt.std(0), (1 - a).sqrt().expand(1, 3), rtol=0.03)
+
+
+def test_timesteps_hand_back_control_at_requested_t():
+    d = Diffusion("cosine")
+    ts = d.timesteps(16, include=[400, 350, 300])
+    assert ts[0] == 1023 and ts[-1] == 0 and ts == sorted(ts, reverse=True)
+    assert {400, 350, 300} <= set(ts) and len(ts) == len(set(ts))
+    seen = []
+    for step in d.steps(tiny_model(), torch.randn(2, 16, 3), [(torch.zeros(1, 384), 1.0)], 16,
+                        include=[400, 350]):
+        seen.append(step.t)
+        if step.t == 400:
+            step.x = torch.zeros_like(step.x)  # the caller may replace x_t
+    assert 400 in seen and 350 in seen and seen[-1] == -1
+
+
+# ---------------------------------------------------------------------------- training
+def test_loss_decreases_on_a_tiny_overfit_set():
+    torch.manual_seed(0)
+    model = PointDiffusionTransformer(ModelConfig(**TINY))
+    d = Diffusion("cosine")
+    x0 = torch.from_numpy(np.stack([shapes.make_shape(f, 0, n_points=64).points * 2
+                                    for f in ("star", "ball")]))
+    cond = torch.eye(2, 384)
+    opt = torch.optim.Adam(model.parameters(), 3e-3)
+    g = torch.Generator().manual_seed(0)
+    t_eval = torch.tensor([200, 600])
+    eval_g = torch.Generator()
+
+    def eval_loss() -> float:
+        eval_g.manual_seed(1)
+        with torch.no_grad():
+            return float(np.mean([d.loss(model, x0, cond, eval_g, 0.0, t_eval).item()
+                                  for _ in range(8)]))
+
+    before = eval_loss()
+    for _ in range(150):
+        loss = d.loss(model, x0, cond, g, 0.0)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    after = eval_loss()
+    assert after < 0.6 * before, (before, after)
+
+
+# ---------------------------------------------------------------------------- guidance
+def test_guidance_scale_one_is_the_conditional_prediction():
+    m, x, t = tiny_model(), torch.randn(3, 32, 3), 300
+    c = torch.randn(1, 384)
+    cond = m(x, torch.full((3,), t), c.expand(3, 384))
+    assert torch.allclose(guided_eps(m, x, t, [(c, 1.0)]), cond, atol=1e-5)
+    # the batched composition path: a second term with scale 0 changes nothing
+    assert torch.allclose(guided_eps(m, x, t, [(c, 1.0), (torch.randn(1, 384), 0.0)]), cond,
+                          atol=1e-5)
+
+
+def test_composition_with_one_term_equals_plain_guidance():
+    m, x, t = tiny_model(), torch.randn(2, 32, 3), 500
+    c, c2, s = torch.randn(1, 384), torch.randn(1, 384), 3.0
+    tt = torch.full((2,), t)
+    un = m(x, tt, torch.zeros(2, 384))
+    plain = un + s * (m(x, tt, c.expand(2, 384)) - un)
+    assert torch.allclose(guided_eps(m, x, t, [(c, s)]), plain, atol=1e-5)
+    # two terms: the sum of the two guidance directions (SPEC section 6)
+    both = plain + 2.0 * (m(x, tt, c2.expand(2, 384)) - un)
+    assert torch.allclose(guided_eps(m, x, t, [(c, s), (c2, 2.0)]), both, atol=1e-5)
+
+
+# ---------------------------------------------------------------------------- network
+def test_permutation_equivariance():
+    m = tiny_model()
+    x, c = torch.randn(2, 40, 3), torch.randn(2, 384)
+    t = torch.tensor([10, 700])
+    perm = torch.randperm(40)
+    assert torch.allclose(m(x, t, c)[:, perm], m(x[:, perm], t, c), atol=1e-5)
+    up = tiny_model(coarse=True)
+    coarse = torch.randn(2, 24, 3)
+    out = up(x, t, c, coarse)
+    assert torch.allclose(out[:, perm], up(x[:, perm], t, c, coarse), atol=1e-5)
+    assert torch.allclose(out, up(x, t, c, coarse[:, torch.randperm(24)]), atol=1e-5)
+
+
+def test_sampler_is_deterministic_under_a_seed():
+    prior = Prior(tiny_model(), bf16=False)
+    c = torch.randn(1, 384)
+    a = prior.sample(embedding=c, n=2, steps=6, seed=3, points=32, return_at=[600, 0])
+    b = prior.sample(embedding=c, n=2, steps=6, seed=3, points=32, return_at=[600, 0])
+    other = prior.sample(embedding=c, n=2, steps=6, seed=4, points=32)
+    assert np.array_equal(a.clouds, b.clouds)
+    assert not np.allclose(a.clouds, other.clouds)
+    assert set(a.intermediates) == {600, 0} and np.array_equal(a.intermediates[0], a.clouds)
+    assert np.abs(a.clouds).max() <= 0.5 + 1e-6  # x_0 clipped to the unit cube
+
+
+def test_checkpoint_save_load_round_trip(tmp_path):
+    cfg = TrainConfig(kind="base", steps=4, batch=2, subset=16, per_family=1, ckpt_every=2,
+                      log_every=2, warmup=1, model=ModelConfig(**TINY))
+    train(cfg, tmp_path / "full", cache_dir=tmp_path / "corpus", progress=False)
+    # interrupted after 2 steps, resumed to 4: the same weights as the uninterrupted run
+    short = TrainConfig(**{**cfg.__dict__, "steps": 2, "model": ModelConfig(**TINY)})
+    train(short, tmp_path / "split", cache_dir=tmp_path / "corpus", progress=False)
+    train(resumed_config(tmp_path / "split", 4), tmp_path / "split", resume=True,
+          cache_dir=tmp_path / "corpus", progress=False)
+    full = torch.load(tmp_path / "full" / "checkpoint.pt", weights_only=False)
+    split = torch.load(tmp_path / "split" / "checkpoint.pt", weights_only=False)
+    for k, v in full["model"].items():
+        assert torch.equal(v, split["model"][k]), k
+    with pytest.raises(FileExistsError):
+        train(cfg, tmp_path / "full", cache_dir=tmp_path / "corpus", progress=False)
+    # shipped-weights file: same predictions as the EMA weights it came from
+    path = export_weights(tmp_path / "full" / "checkpoint.pt", tmp_path / "w.pt")
+    model, meta = load_model(path)
+    ref = PointDiffusionTransformer(ModelConfig(**TINY))
+    ref.load_state_dict(full["ema"])
+    x, t, c = torch.randn(1, 20, 3), torch.tensor([100]), torch.randn(1, 384)
+    assert torch.allclose(model(x, t, c), ref(x, t, c))
+    assert meta["kind"] == "base" and meta["steps"] == 4
+
+
+def test_bad_checkpoints_are_named(tmp_path):
+    with pytest.raises(CheckpointError, match="not found"):
+        load_model(tmp_path / "missing.pt")
+    (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(CheckpointError, match="not a readable checkpoint"):
+        load_model(tmp_path / "junk.pt")
+
+
+# ---------------------------------------------------------------------------- corpus, text
+def test_corpus_is_deterministic_normalised_and_large_enough():
+    assert len(shapes.FAMILIES) >= 25
+    for fam in ("star", "table", "hexapod", "ring"):
+        a = shapes.make_shape(fam, 3, n_points=1024, seed=7)
+        b = shapes.make_shape(fam, 3, n_points=1024, seed=7)
+        assert np.array_equal(a.points, b.points)
+        assert np.abs(a.points).max() <= 0.5 + 1e-6
+        assert np.ptp(a.points, 0).max() == pytest.approx(1.0, abs=1e-5)
+        assert len(a.captions) >= 10
+    assert not np.array_equal(shapes.make_shape("star", 0).points,
+                              shapes.make_shape("star", 1).points)
+    assert shapes.make_shape("ball", 0, n_points=4096).points.shape == (4096, 3)
+
+
+def test_text_encoder():
+    e = text.encode(["a star", "a five-pointed star", "a table"])
+    assert e.shape == (3, 384)
+    assert torch.allclose(e.norm(dim=1), torch.ones(3), atol=1e-4)
+    assert e[0] @ e[1] > e[0] @ e[2]  # paraphrases are closer than other families
+    with pytest.raises(ValueError, match="non-empty"):
+        text.encode(["  "])
+
+
+def test_guidance_out_of_range_is_refused():
+    prior = Prior(tiny_model(), bf16=False)
+    with pytest.raises(ValueError, match="guidance"):
+        prior.sample(embedding=torch.randn(1, 384), guidance=1e6, steps=2, points=8)
