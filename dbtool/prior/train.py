@@ -242,9 +242,12 @@ def export_weights(checkpoint: Path, out: Path) -> Path:
     ck = torch.load(checkpoint, weights_only=False)
     cfg = ck["config"]
     state = {k: v.to(torch.float32) for k, v in ck["ema"].items()}
+    log = read_log(checkpoint.parent)
+    tail = [r["loss"] for r in log[-20:]]  # the last 20 logged windows (500 steps by default)
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_save({"kind": cfg["kind"], "model": cfg["model"], "state": state,
                  "steps": ck["step"], "train_seconds": ck["elapsed"],
+                 "final_loss": float(np.mean(tail)) if tail else None,
                  "train_config": cfg}, out)
     return out
 

@@ -1,0 +1,136 @@
+"""Speed and memory of the generative prior: sampling and upsampling on this CPU.
+
+Cases (each in a fresh subprocess, so its peak RSS is its own):
+
+* ``base``: classifier-free guided DDIM sampling (guidance 3, so every step evaluates the
+  conditional and the unconditional prediction as one batch) of 1,024-point clouds for one
+  prompt, at batch 1 and 16 with 64 steps, and one co-design epoch's worth of designs (60
+  samples, SPEC Table 4) at 64 and 32 steps;
+* ``upsampler``: 1,024 -> 4,096 points, 32 steps, batch 16.
+
+Each case runs once to warm up, then ``--repeats`` times; the median wall time is reported as
+samples per second and seconds per batch. Peak memory is the process's ``VmHWM`` after the case
+minus its ``VmRSS`` after the imports and the model load. Prints a markdown table and writes
+the numbers with the machine description to ``benchmarks/results/prior.json``.
+
+Usage::
+
+    python benchmarks/prior.py               # ~5 minutes on 2 cores
+    python benchmarks/prior.py --quick       # smoke test: batch 1 and 4, 8 steps
+    python benchmarks/prior.py --threads 1 --out /tmp/prior.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_OUT = ROOT / "benchmarks" / "results" / "prior.json"
+GOAL_EPOCH_S = 60.0  # 60 designs (one epoch) in under a minute
+CASES = [("base", 1, 64), ("base", 16, 64), ("base", 60, 64), ("base", 60, 32),
+         ("upsampler", 16, 32)]
+QUICK_CASES = [("base", 1, 8), ("base", 4, 8), ("upsampler", 2, 4)]
+
+
+def _rss(field: str) -> float:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(field):
+            return float(line.split()[1]) * 1024.0
+    return float("nan")
+
+
+def worker(kind: str, batch: int, steps: int, repeats: int, threads: int | None) -> dict:
+    """Run one case in this process and return its numbers."""
+    import numpy as np
+    import torch
+
+    from dbtool.prior.pipeline import Prior
+
+    if threads:
+        torch.set_num_threads(threads)
+    prior = Prior.load(with_upsampler=kind == "upsampler")
+    emb = prior.embed("a star")  # the text encoder is not part of the timed loop
+    coarse = np.random.default_rng(0).uniform(-0.4, 0.4, (batch, 1024, 3)).astype(np.float32)
+    base_rss = _rss("VmRSS")
+
+    def once(seed: int) -> None:
+        if kind == "base":
+            prior.sample(embedding=emb, n=batch, guidance=3.0, steps=steps, seed=seed)
+        else:
+            prior.upsample(coarse, steps=steps, seed=seed)
+
+    once(0)
+    times = []
+    for r in range(repeats):
+        t0 = time.perf_counter()
+        once(r + 1)
+        times.append(time.perf_counter() - t0)
+    sec = statistics.median(times)
+    return {"kind": kind, "batch": batch, "steps": steps, "seconds": sec,
+            "samples_per_s": batch / sec, "peak_mib": (_rss("VmHWM") - base_rss) / 2**20,
+            "threads": torch.get_num_threads(), "repeats": repeats}
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true", help="tiny cases (smoke test)")
+    p.add_argument("--repeats", type=int, default=None, help="timed runs per case (default 3)")
+    p.add_argument("--threads", type=int, default=None, help="torch threads (default: all)")
+    p.add_argument("--out", type=Path, default=None, help="JSON output path")
+    p.add_argument("--worker", nargs=3, metavar=("KIND", "BATCH", "STEPS"), help=argparse.SUPPRESS)
+    a = p.parse_args(argv)
+    repeats = a.repeats or (1 if a.quick else 3)
+    if a.worker:
+        kind, batch, steps = a.worker[0], int(a.worker[1]), int(a.worker[2])
+        print(json.dumps(worker(kind, batch, steps, repeats, a.threads)))
+        return 0
+
+    rows = []
+    for kind, batch, steps in QUICK_CASES if a.quick else CASES:
+        cmd = [sys.executable, __file__, "--worker", kind, str(batch), str(steps),
+               "--repeats", str(repeats)] + (["--threads", str(a.threads)] if a.threads else [])
+        out = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+        if out.returncode != 0:
+            print(out.stderr[-2000:], file=sys.stderr)
+            print(f"error: case {kind} batch {batch} failed", file=sys.stderr)
+            return 1
+        rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
+        r = rows[-1]
+        print(f"  {kind:9s} batch {batch:3d} steps {steps:3d}: {r['seconds']:.2f} s", flush=True)
+
+    print("\n| model | batch | steps | s / batch | samples / s | peak memory (MiB) |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for r in rows:
+        print(f"| {r['kind']} | {r['batch']} | {r['steps']} | {r['seconds']:.2f} | "
+              f"{r['samples_per_s']:.2f} | {r['peak_mib']:.0f} |")
+    epoch = [r for r in rows if r["kind"] == "base" and r["batch"] == 60]
+    if epoch:
+        best = min(epoch, key=lambda r: r["seconds"])
+        verdict = "met" if best["seconds"] < GOAL_EPOCH_S else "missed"
+        print(f"\none epoch of designs (60 samples): {best['seconds']:.1f} s at "
+              f"{best['steps']} steps (goal < {GOAL_EPOCH_S:.0f} s: {verdict})")
+    import torch
+
+    result = {"machine": {"platform": platform.platform(), "processor": platform.processor(),
+                          "cpus": os.cpu_count(), "torch": torch.__version__},
+              "goal_epoch_s": GOAL_EPOCH_S, "cases": rows,
+              "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    out_path = a.out or (DEFAULT_OUT.with_name("prior-quick.json") if a.quick else DEFAULT_OUT)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out_path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(result, indent=2))
+    tmp.replace(out_path)
+    print(f"wrote {out_path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,84 @@
+"""The shipped prior: prompt fidelity on a subset of families, upsampler, `dbtool generate`."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+from dbtool.pointcloud import load_ply
+from dbtool.prior.evaluate import evaluate
+from dbtool.prior.metrics import chamfer_matrix
+from dbtool.prior.pipeline import BASE_WEIGHTS, UPSAMPLER_WEIGHTS, Prior
+
+SUBSET = ["ball", "star", "table", "ring", "bar", "finger"]
+
+
+@pytest.fixture(scope="module")
+def prior():
+    return Prior.load()
+
+
+def test_weights_ship_with_the_package():
+    assert BASE_WEIGHTS.is_file() and UPSAMPLER_WEIGHTS.is_file()
+    size = BASE_WEIGHTS.stat().st_size + UPSAMPLER_WEIGHTS.stat().st_size
+    assert size < 40e6
+
+
+def test_prompt_fidelity_on_a_subset(prior):
+    """1-NN family accuracy (Chamfer, held-out references) on six families, 8 samples each."""
+    res = evaluate(prior, SUBSET, samples=8, steps=32, paraphrases=False, interpolate=False,
+                   progress=None)
+    accs = {f: r["accuracy"] for f, r in res["families"].items()}
+    assert res["ceiling"] > 0.95
+    assert res["accuracy"] >= 0.8, accs
+    assert min(accs.values()) >= 0.5, accs
+    for fam, r in res["families"].items():  # no collapse onto one shape
+        assert r["spread_ratio"] > 0.2, (fam, r)
+
+
+def test_upsampler_densifies_the_coarse_cloud(prior):
+    coarse = prior.sample("a table", n=2, steps=16, seed=0).clouds
+    fine = prior.upsample(coarse, steps=16, seed=0)
+    assert fine.shape == (2, 4096, 3)
+    assert np.array_equal(fine[:, :1024], coarse)  # the coarse points are kept
+    new = torch.from_numpy(fine[:, 1024:].astype(np.float32))
+    c = torch.from_numpy(coarse.astype(np.float32))
+    near = torch.diagonal(chamfer_matrix(new, c))
+    rng = np.random.default_rng(0)
+    noise = torch.from_numpy(rng.uniform(-0.5, 0.5, (2, 3072, 3)).astype(np.float32))
+    assert torch.all(near < 0.1 * torch.diagonal(chamfer_matrix(noise, c)))
+
+
+def _generate(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "dbtool.cli", "generate", *args],
+                          capture_output=True, text=True, cwd=cwd, timeout=600)
+
+
+def test_generate_writes_clouds_npz_and_grid(tmp_path):
+    out = _generate("a star", "-n", "2", "--steps", "8", "--upsample", "-o", str(tmp_path / "g"))
+    assert out.returncode == 0, out.stderr
+    g = tmp_path / "g"
+    for name in ("a-star-0.ply", "a-star-1.ply", "samples.npz", "grid.png", "generate.json"):
+        assert (g / name).stat().st_size > 0, name
+    pts = load_ply(g / "a-star-0.ply")
+    assert pts.shape == (4096, 3) and np.abs(pts).max() <= 0.5 + 1e-5
+    d = np.load(g / "samples.npz")
+    assert d["coarse"].shape == (2, 1024, 3) and d["fine"].shape == (2, 4096, 3)
+    assert np.array_equal(d["fine"][0], pts)
+
+
+@pytest.mark.parametrize("args, message", [
+    (("", "-o", "OUT"), "prompt is empty"),
+    (("a star", "--guidance", "1e9", "-o", "OUT"), "guidance scale"),
+    (("a star", "--base", "missing.pt", "-o", "OUT"), "checkpoint not found"),
+])
+def test_generate_bad_input_is_one_line(tmp_path, args, message):
+    args = [str(tmp_path / "o") if a == "OUT" else a for a in args]
+    out = _generate(*args, cwd=tmp_path)
+    assert out.returncode != 0
+    errors = [line for line in out.stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and message in errors[0], out.stderr
+    assert "Traceback" not in out.stderr
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
