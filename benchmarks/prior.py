@@ -6,11 +6,14 @@ Cases (each in a fresh subprocess, so its peak RSS is its own):
   conditional and the unconditional prediction as one batch) of 1,024-point clouds for one
   prompt, at batch 1 and 16 with 64 steps, and one co-design epoch's worth of designs (60
   samples, SPEC Table 4) at 64 and 32 steps;
-* ``upsampler``: 1,024 -> 4,096 points, 32 steps, batch 16.
+* ``upsampler``: 1,024 -> 4,096 points, 32 steps, batch 16;
+* ``train``: one training step of the base model as it was trained (batch 32 x 256 points, one
+  thread), with bfloat16 autocast and in float32.
 
 Each case runs once to warm up, then ``--repeats`` times; the median wall time is reported as
 samples per second and seconds per batch. Peak memory is the process's ``VmHWM`` after the case
-minus its ``VmRSS`` after the imports and the model load. Prints a markdown table and writes
+minus its ``VmRSS`` after the imports and the model load (the high-water mark is reset there
+through ``/proc/self/clear_refs``). Prints a markdown table and writes
 the numbers with the machine description to ``benchmarks/results/prior.json``.
 
 Usage::
@@ -36,8 +39,8 @@ ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "prior.json"
 GOAL_EPOCH_S = 60.0  # 60 designs (one epoch) in under a minute
 CASES = [("base", 1, 64), ("base", 16, 64), ("base", 60, 64), ("base", 60, 32),
-         ("upsampler", 16, 32)]
-QUICK_CASES = [("base", 1, 8), ("base", 4, 8), ("upsampler", 2, 4)]
+         ("upsampler", 16, 32), ("train", 32, 256)]
+QUICK_CASES = [("base", 1, 8), ("base", 4, 8), ("upsampler", 2, 4), ("train", 4, 64)]
 
 
 def _rss(field: str) -> float:
@@ -47,6 +50,43 @@ def _rss(field: str) -> float:
     return float("nan")
 
 
+def _reset_peak() -> None:
+    try:
+        Path("/proc/self/clear_refs").write_text("5")
+    except OSError:  # not Linux, or not allowed: the peak then includes the load
+        pass
+
+
+def train_steps(batch: int, points: int, repeats: int) -> dict:
+    """Seconds per training step of the base model, bf16 autocast and float32 (one thread)."""
+    import torch
+
+    from dbtool.prior.diffusion import Diffusion
+    from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
+    from dbtool.prior.pipeline import BASE_WEIGHTS, load_model
+
+    torch.set_num_threads(1)
+    cfg = ModelConfig(**load_model(BASE_WEIGHTS)[1]["model"])
+    model = PointDiffusionTransformer(cfg)
+    opt = torch.optim.AdamW(model.parameters(), 1e-4)
+    diff = Diffusion("cosine")
+    x, c = torch.randn(batch, points, 3), torch.randn(batch, cfg.cond_dim)
+    out = {}
+    for name, bf16 in (("bf16", True), ("fp32", False)):
+        times = []
+        for r in range(repeats + 2):  # two warm-up steps
+            t0 = time.perf_counter()
+            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
+                loss = diff.loss(model, x, c)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            if r >= 2:
+                times.append(time.perf_counter() - t0)
+        out[name] = statistics.median(times)
+    return out
+
+
 def worker(kind: str, batch: int, steps: int, repeats: int, threads: int | None) -> dict:
     """Run one case in this process and return its numbers."""
     import numpy as np
@@ -54,12 +94,19 @@ def worker(kind: str, batch: int, steps: int, repeats: int, threads: int | None)
 
     from dbtool.prior.pipeline import Prior
 
+    if kind == "train":
+        t = train_steps(batch, steps, max(repeats, 5))
+        return {"kind": "train", "batch": batch, "steps": steps, "seconds": t["bf16"],
+                "samples_per_s": batch / t["bf16"], "fp32_seconds": t["fp32"],
+                "bf16_speedup": t["fp32"] / t["bf16"], "peak_mib": float("nan"), "threads": 1,
+                "repeats": max(repeats, 5)}
     if threads:
         torch.set_num_threads(threads)
     prior = Prior.load(with_upsampler=kind == "upsampler")
     emb = prior.embed("a star")  # the text encoder is not part of the timed loop
     coarse = np.random.default_rng(0).uniform(-0.4, 0.4, (batch, 1024, 3)).astype(np.float32)
     base_rss = _rss("VmRSS")
+    _reset_peak()
 
     def once(seed: int) -> None:
         if kind == "base":
@@ -109,8 +156,15 @@ def main(argv: list[str] | None = None) -> int:
     print("\n| model | batch | steps | s / batch | samples / s | peak memory (MiB) |")
     print("|---|---:|---:|---:|---:|---:|")
     for r in rows:
+        if r["kind"] == "train":
+            continue
         print(f"| {r['kind']} | {r['batch']} | {r['steps']} | {r['seconds']:.2f} | "
               f"{r['samples_per_s']:.2f} | {r['peak_mib']:.0f} |")
+    for r in rows:
+        if r["kind"] == "train":
+            print(f"\ntraining step (batch {r['batch']} x {r['steps']} points, 1 thread): "
+                  f"{r['seconds']:.3f} s bf16, {r['fp32_seconds']:.3f} s fp32 "
+                  f"({r['bf16_speedup']:.1f}x)")
     epoch = [r for r in rows if r["kind"] == "base" and r["batch"] == 60]
     if epoch:
         best = min(epoch, key=lambda r: r["seconds"])

@@ -224,6 +224,7 @@ def generate(
     seed: int = typer.Option(0, help="seed of the initial noise"),
     upsample: bool = typer.Option(False, "--upsample", help="densify to 4,096 points"),
     base: Path = typer.Option(None, help="base model weights (default: the shipped ones)"),
+    upsampler: Path = typer.Option(None, help="upsampler weights (default: the shipped ones)"),
     out: Path = typer.Option(None, "-o", "--out", help="output folder (default "
                                                       "runs/generate-TIME)"),
 ) -> None:
@@ -237,7 +238,7 @@ def generate(
     try:
         if any(not p.strip() for p in prompts):
             raise ValueError("the prompt is empty: say what to generate, e.g. \"a star\"")
-        prior = Prior.load(base, with_upsampler=upsample)
+        prior = Prior.load(base, upsampler if upsample else None, with_upsampler=upsample)
         summary = run_generate(prior, prompts, settings, out)
     except (ValueError, RuntimeError) as exc:
         _fail(str(exc))

@@ -8,14 +8,13 @@ as one ``.npz`` (arrays plus a JSON header) written atomically, and loads back i
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from dbtool.atomic import atomic_write
 from dbtool.sim.robot import Robot
 
 FORMAT = "dbtool.design/1"
@@ -50,15 +49,13 @@ class Design:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         header = {"format": FORMAT, "task": self.task, "metrics": self.metrics, "meta": self.meta}
-        fd, tmp = tempfile.mkstemp(suffix=".npz", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                np.savez_compressed(fh, header=np.array(json.dumps(header)), **self.arrays())
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.remove(tmp)
-        return path
+        arrays = self.arrays()
+
+        def save(tmp: str) -> None:
+            with open(tmp, "wb") as fh:
+                np.savez_compressed(fh, header=np.array(json.dumps(header)), **arrays)
+
+        return atomic_write(path, save)
 
     @classmethod
     def load(cls, path: str | Path) -> Design:

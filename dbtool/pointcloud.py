@@ -7,29 +7,15 @@ frame so ``dbtool robotize CLOUD.ply`` reads back exactly what ``dbtool generate
 from __future__ import annotations
 
 import io
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from dbtool.atomic import atomic_write_bytes
+
 
 class CloudFileError(ValueError):
     """A cloud file is missing, unreadable or holds no usable points."""
-
-
-def _atomic_bytes(data: bytes, path: Path) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=path.suffix, dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-    return path
 
 
 def save_ply(points: np.ndarray, path: str | Path) -> Path:
@@ -40,7 +26,7 @@ def save_ply(points: np.ndarray, path: str | Path) -> Path:
     header = ("ply\nformat binary_little_endian 1.0\ncomment dbtool point cloud, y up\n"
               f"element vertex {len(pts)}\nproperty float x\nproperty float y\n"
               "property float z\nend_header\n").encode()
-    return _atomic_bytes(header + pts.tobytes(), Path(path))
+    return atomic_write_bytes(header + pts.tobytes(), Path(path))
 
 
 def load_ply(path: str | Path) -> np.ndarray:
@@ -64,4 +50,4 @@ def save_npz(path: str | Path, **arrays: np.ndarray) -> Path:
     """Write arrays to an ``.npz`` atomically."""
     buf = io.BytesIO()
     np.savez(buf, **arrays)
-    return _atomic_bytes(buf.getvalue(), Path(path))
+    return atomic_write_bytes(buf.getvalue(), Path(path))

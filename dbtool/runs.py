@@ -3,15 +3,15 @@
 from __future__ import annotations
 
 import json
-import os
 import platform
 import random
 import subprocess
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+
+from dbtool.atomic import atomic_write_text
 
 
 def seed_everything(seed: int) -> None:
@@ -28,17 +28,7 @@ def seed_everything(seed: int) -> None:
 
 def write_json(path: Path, obj) -> Path:
     """Write JSON atomically (temp file in the same folder, then rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=".json", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(obj, fh, indent=2, default=_default)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-    return path
+    return atomic_write_text(path, json.dumps(obj, indent=2, default=_default))
 
 
 def _default(o):

@@ -8,7 +8,7 @@ from dbtool.prior import shapes, text
 from dbtool.prior.diffusion import Diffusion, guided_eps
 from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
 from dbtool.prior.pipeline import CheckpointError, Prior, load_model
-from dbtool.prior.train import TrainConfig, export_weights, resumed_config, train
+from dbtool.prior.train import TrainConfig, export_weights, read_log, resumed_config, train
 
 TINY = dict(width=32, heads=2, latents=8, depth=1, decoder_layers=1)
 
@@ -143,29 +143,59 @@ def test_sampler_is_deterministic_under_a_seed():
     assert np.abs(a.clouds).max() <= 0.5 + 1e-6  # x_0 clipped to the unit cube
 
 
-def test_checkpoint_save_load_round_trip(tmp_path):
-    cfg = TrainConfig(kind="base", steps=4, batch=2, subset=16, per_family=1, ckpt_every=2,
-                      log_every=2, warmup=1, model=ModelConfig(**TINY))
-    train(cfg, tmp_path / "full", cache_dir=tmp_path / "corpus", progress=False)
-    # interrupted after 2 steps, resumed to 4: the same weights as the uninterrupted run
-    short = TrainConfig(**{**cfg.__dict__, "steps": 2, "model": ModelConfig(**TINY)})
-    train(short, tmp_path / "split", cache_dir=tmp_path / "corpus", progress=False)
-    train(resumed_config(tmp_path / "split", 4), tmp_path / "split", resume=True,
-          cache_dir=tmp_path / "corpus", progress=False)
-    full = torch.load(tmp_path / "full" / "checkpoint.pt", weights_only=False)
-    split = torch.load(tmp_path / "split" / "checkpoint.pt", weights_only=False)
-    for k, v in full["model"].items():
-        assert torch.equal(v, split["model"][k]), k
+class Interrupt(Exception):
+    pass
+
+
+def test_training_resumes_bit_for_bit_after_an_interruption(tmp_path, monkeypatch):
+    from dbtool.prior import train as train_mod
+
+    cfg = TrainConfig(kind="base", steps=6, batch=2, subset=16, per_family=1, ckpt_every=2,
+                      log_every=1, warmup=2, model=ModelConfig(**TINY))
+    corpus = tmp_path / "corpus"
+    train(cfg, tmp_path / "full", cache_dir=corpus, progress=False)
+    # the same run killed during step 5 (after the checkpoint of step 4), then resumed
+    real = train_mod.make_batch
+    calls = {"n": 0}
+
+    def dying(*a, **k):
+        calls["n"] += 1
+        if calls["n"] == 5:
+            raise Interrupt
+        return real(*a, **k)
+
+    monkeypatch.setattr(train_mod, "make_batch", dying)
+    with pytest.raises(Interrupt):
+        train(cfg, tmp_path / "split", cache_dir=corpus, progress=False)
+    monkeypatch.setattr(train_mod, "make_batch", real)
+    resumed = resumed_config(tmp_path / "split")
+    assert resumed == cfg
+    train(resumed, tmp_path / "split", resume=True, cache_dir=corpus, progress=False)
+    full = torch.load(tmp_path / "full" / "checkpoint.pt", weights_only=True)
+    split = torch.load(tmp_path / "split" / "checkpoint.pt", weights_only=True)
+    for part in ("model", "ema"):
+        for k, v in full[part].items():
+            assert torch.equal(v, split[part][k]), (part, k)
+    for a, b in zip(full["opt"]["state"].values(), split["opt"]["state"].values(), strict=True):
+        assert torch.equal(a["exp_avg"], b["exp_avg"])
+    log_full, log_split = read_log(tmp_path / "full"), read_log(tmp_path / "split")
+    assert [r["step"] for r in log_split] == [1, 2, 3, 4, 5, 6]  # no duplicated rows
+    assert [r["loss"] for r in log_split] == [r["loss"] for r in log_full]
+    with pytest.raises(ValueError, match="would go back"):
+        train(resumed_config(tmp_path / "split", 3), tmp_path / "split", resume=True,
+              cache_dir=corpus, progress=False)
     with pytest.raises(FileExistsError):
-        train(cfg, tmp_path / "full", cache_dir=tmp_path / "corpus", progress=False)
+        train(cfg, tmp_path / "full", cache_dir=corpus, progress=False)
     # shipped-weights file: same predictions as the EMA weights it came from
     path = export_weights(tmp_path / "full" / "checkpoint.pt", tmp_path / "w.pt")
-    model, meta = load_model(path)
+    model, meta = load_model(path, "base")
     ref = PointDiffusionTransformer(ModelConfig(**TINY))
     ref.load_state_dict(full["ema"])
     x, t, c = torch.randn(1, 20, 3), torch.tensor([100]), torch.randn(1, 384)
     assert torch.allclose(model(x, t, c), ref(x, t, c))
-    assert meta["kind"] == "base" and meta["steps"] == 4
+    assert meta["kind"] == "base" and meta["steps"] == 6 and meta["final_loss"] > 0
+    with pytest.raises(CheckpointError, match="not the upsampler model"):
+        load_model(path, "upsampler")
 
 
 def test_bad_checkpoints_are_named(tmp_path):
@@ -204,3 +234,24 @@ def test_guidance_out_of_range_is_refused():
     prior = Prior(tiny_model(), bf16=False)
     with pytest.raises(ValueError, match="guidance"):
         prior.sample(embedding=torch.randn(1, 384), guidance=1e6, steps=2, points=8)
+
+
+def test_paraphrases_are_not_training_captions():
+    from dbtool.prior.evaluate import PARAPHRASES
+
+    seen = {c for fam in shapes.FAMILIES for i in range(40)
+            for c in shapes.make_shape(fam, i, n_points=8).captions}
+    assert not set(PARAPHRASES) & seen
+
+
+def test_evaluation_runs_every_part():
+    from dbtool.prior.evaluate import evaluate, prompt_of
+
+    assert prompt_of("bar") == "a bar" and prompt_of("wings") == "a pair of wings"
+    prior = Prior(tiny_model(), bf16=False)
+    res = evaluate(prior, ["ball", "star"], samples=2, steps=2, progress=None,
+                   reference_families=["ball", "star", "bar", "ring", "table", "pyramid"])
+    assert set(res["families"]) == {"ball", "star"}
+    assert 0.0 <= res["accuracy"] <= 1.0 and res["ceiling"] > 0.9
+    assert res["paraphrases"] and len(res["interpolations"]) == 3
+    assert all(len(it["path"]) == 7 for it in res["interpolations"])

@@ -1,5 +1,6 @@
 """The shipped prior: prompt fidelity on a subset of families, upsampler, `dbtool generate`."""
 
+import os
 import subprocess
 import sys
 
@@ -10,7 +11,7 @@ import torch
 from dbtool.pointcloud import load_ply
 from dbtool.prior.evaluate import evaluate
 from dbtool.prior.metrics import chamfer_matrix
-from dbtool.prior.pipeline import BASE_WEIGHTS, UPSAMPLER_WEIGHTS, Prior
+from dbtool.prior.pipeline import BASE_WEIGHTS, UPSAMPLER_WEIGHTS, CheckpointError, Prior
 
 SUBSET = ["ball", "star", "table", "ring", "bar", "finger"]
 
@@ -29,7 +30,7 @@ def test_weights_ship_with_the_package():
 def test_prompt_fidelity_on_a_subset(prior):
     """1-NN family accuracy (Chamfer, held-out references) on six families, 8 samples each."""
     res = evaluate(prior, SUBSET, samples=8, steps=32, paraphrases=False, interpolate=False,
-                   progress=None)
+                   progress=None)  # references: every family, so any mistake counts
     accs = {f: r["accuracy"] for f, r in res["families"].items()}
     assert res["ceiling"] > 0.95
     assert res["accuracy"] >= 0.8, accs
@@ -51,6 +52,13 @@ def test_upsampler_densifies_the_coarse_cloud(prior):
     assert torch.all(near < 0.1 * torch.diagonal(chamfer_matrix(noise, c)))
 
 
+def test_wrong_or_missing_weights_are_named(tmp_path):
+    with pytest.raises(CheckpointError, match="not the base model"):
+        Prior.load(UPSAMPLER_WEIGHTS)
+    with pytest.raises(CheckpointError, match="not found"):
+        Prior.load(upsampler=tmp_path / "none.pt")
+
+
 def _generate(*args, cwd=None):
     return subprocess.run([sys.executable, "-m", "dbtool.cli", "generate", *args],
                           capture_output=True, text=True, cwd=cwd, timeout=600)
@@ -67,12 +75,17 @@ def test_generate_writes_clouds_npz_and_grid(tmp_path):
     d = np.load(g / "samples.npz")
     assert d["coarse"].shape == (2, 1024, 3) and d["fine"].shape == (2, 4096, 3)
     assert np.array_equal(d["fine"][0], pts)
+    umask = os.umask(0)
+    os.umask(umask)
+    for f in g.iterdir():  # ordinary file permissions, not the temp file's 0600
+        assert f.stat().st_mode & 0o777 == 0o666 & ~umask, f
 
 
 @pytest.mark.parametrize("args, message", [
     (("", "-o", "OUT"), "prompt is empty"),
     (("a star", "--guidance", "1e9", "-o", "OUT"), "guidance scale"),
     (("a star", "--base", "missing.pt", "-o", "OUT"), "checkpoint not found"),
+    (("a star", "--upsample", "--upsampler", "none.pt", "-o", "OUT"), "checkpoint not found"),
 ])
 def test_generate_bad_input_is_one_line(tmp_path, args, message):
     args = [str(tmp_path / "o") if a == "OUT" else a for a in args]

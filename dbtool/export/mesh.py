@@ -9,12 +9,12 @@ are united with manifold3d booleans.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from dbtool.atomic import atomic_write
 
 MM_PER_UNIT = 1000.0  # the 0.08 workspace becomes an 80 mm part
 
@@ -74,16 +74,8 @@ def to_trimesh(manifold):
 def write_mesh(manifold, path: Path) -> Path:
     """Write STL or 3MF (by suffix) atomically."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        to_trimesh(manifold).export(tmp, file_type=path.suffix.lstrip("."))
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-    return path
+    mesh = to_trimesh(manifold)
+    return atomic_write(path, lambda tmp: mesh.export(tmp, file_type=path.suffix.lstrip(".")))
 
 
 def report(manifold) -> dict:

@@ -75,10 +75,10 @@ class Diffusion:
         """Epsilon MSE at uniform random t; the condition is zeroed with ``p_uncond``."""
         b = x0.shape[0]
         if t is None:
-            t = torch.randint(0, self.T, (b,), generator=generator)
-        eps = torch.randn(x0.shape, generator=generator)
+            t = torch.randint(0, self.T, (b,), generator=generator).to(x0.device)
+        eps = torch.randn(x0.shape, generator=generator).to(x0.device)
         if p_uncond > 0:
-            keep = (torch.rand(b, generator=generator) >= p_uncond).float()
+            keep = (torch.rand(b, generator=generator) >= p_uncond).float().to(x0.device)
             cond = cond * keep[:, None]
         pred = model(self.q_sample(x0, t, eps), t, cond)
         return ((pred.float() - eps) ** 2).mean()
@@ -96,23 +96,24 @@ class Diffusion:
         return sorted(grid, reverse=True)
 
     def predict_x0(self, x: torch.Tensor, t: int, eps: torch.Tensor) -> torch.Tensor:
-        a = self.abar[t]
+        a = self.abar[t].to(x.device)
         return (x - (1 - a).sqrt() * eps) / a.sqrt()
 
     def update(self, x: torch.Tensor, t: int, t_prev: int, eps: torch.Tensor, eta: float = 0.0,
                generator: torch.Generator | None = None, clip: float | None = 1.0):
         """One DDIM step ``t -> t_prev`` (``eta = 1``: strided DDPM). Returns (x_prev, x0)."""
         x0 = self.predict_x0(x, t, eps)
+        a = self.abar[t].to(x.device)
         if clip is not None:
             x0 = x0.clamp(-clip, clip)
-            eps = (x - self.abar[t].sqrt() * x0) / (1 - self.abar[t]).sqrt()
+            eps = (x - a.sqrt() * x0) / (1 - a).sqrt()
         if t_prev < 0:
             return x0, x0
-        a, ap = self.abar[t], self.abar[t_prev]
+        ap = self.abar[t_prev].to(x.device)
         sigma = eta * ((1 - ap) / (1 - a) * (1 - a / ap)).clamp(min=0).sqrt()
         x_prev = ap.sqrt() * x0 + (1 - ap - sigma**2).clamp(min=0).sqrt() * eps
         if eta > 0:
-            x_prev = x_prev + sigma * torch.randn(x.shape, generator=generator)
+            x_prev = x_prev + sigma * torch.randn(x.shape, generator=generator).to(x.device)
         return x_prev, x0
 
     def steps(self, model: EpsModel, x_T: torch.Tensor, conds: Sequence[tuple[torch.Tensor,
@@ -152,13 +153,16 @@ def guided_eps(model: EpsModel, x: torch.Tensor, t: int,
     if not conds:
         raise ValueError("guidance needs at least one condition")
     dim = conds[0][0].shape[-1]
+    dev = x.device
     if len(conds) == 1 and conds[0][1] == 1.0:  # plain conditional prediction: one pass
-        c = conds[0][0]
+        c = conds[0][0].to(dev)
         with torch.no_grad():
-            return model(x, torch.full((b,), t, dtype=torch.long), c.expand(b, dim)).float()
-    embs = [torch.zeros(b, dim)] + [c.expand(b, dim) if c.shape[0] == 1 else c for c, _ in conds]
+            return model(x, torch.full((b,), t, dtype=torch.long, device=dev),
+                         c.expand(b, dim)).float()
+    embs = [torch.zeros(b, dim, device=dev)] + [
+        (c.expand(b, dim) if c.shape[0] == 1 else c).to(dev) for c, _ in conds]
     xs = x.repeat(len(embs), 1, 1)
-    tt = torch.full((xs.shape[0],), t, dtype=torch.long)
+    tt = torch.full((xs.shape[0],), t, dtype=torch.long, device=dev)
     with torch.no_grad():
         out = model(xs, tt, torch.cat(embs)).float().view(len(embs), b, *x.shape[1:])
     eps = out[0]

@@ -53,9 +53,15 @@ def generate(prior: Prior, prompts: list[str], settings: GenerateSettings, out: 
     out.mkdir(parents=True, exist_ok=True)
     labels = [p for p in prompts for _ in range(settings.n)]
     clouds = res.fine if res.fine is not None else res.clouds
+    names: dict[str, str] = {}  # prompt -> file stem, unique even when two prompts share a slug
+    for p in prompts:
+        stem = slug(p)
+        while stem in names.values():
+            stem += "-x"
+        names.setdefault(p, stem)
     files = []
     for k, (p, cloud) in enumerate(zip(labels, clouds, strict=True)):
-        files.append(save_ply(cloud, out / f"{slug(p)}-{k % settings.n}.ply"))
+        files.append(save_ply(cloud, out / f"{names[p]}-{k % settings.n}.ply"))
     arrays = {"coarse": res.clouds.astype(np.float32), "prompts": np.array(labels)}
     if res.fine is not None:
         arrays["fine"] = res.fine.astype(np.float32)

@@ -88,7 +88,8 @@ def fourier(x: torch.Tensor, n_freq: int) -> torch.Tensor:
 def timestep_embedding(t: torch.Tensor, dim: int) -> torch.Tensor:
     """Sinusoidal embedding of the (integer) diffusion timestep, as in DDPM."""
     half = dim // 2
-    freqs = torch.exp(-math.log(10000.0) * torch.arange(half, dtype=torch.float32) / half)
+    freqs = torch.exp(-math.log(10000.0) * torch.arange(half, dtype=torch.float32,
+                                                        device=t.device) / half)
     ang = t.float()[:, None] * freqs[None] * (1000.0 / T_TRAIN)
     return torch.cat([ang.cos(), ang.sin()], -1)
 

@@ -32,14 +32,17 @@ class CheckpointError(ValueError):
     """A weights file is missing or is not a dbtool prior checkpoint."""
 
 
-def load_model(path: str | Path) -> tuple[PointDiffusionTransformer, dict]:
+def load_model(path: str | Path, kind: str | None = None) -> tuple[PointDiffusionTransformer,
+                                                                    dict]:
     """A model and its metadata from a file written by :func:`~dbtool.prior.train.export_weights`
-    (or a training ``checkpoint.pt``, whose EMA weights are used)."""
+    (or a training ``checkpoint.pt``, whose EMA weights are used). ``kind`` (``"base"`` or
+    ``"upsampler"``), when given, must match the file's. Files are read with
+    ``weights_only=True``: a checkpoint cannot run code."""
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(f"checkpoint not found: {path}")
     try:
-        ck = torch.load(path, map_location="cpu", weights_only=False)
+        ck = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 - any unreadable file gets the same one-line error
         raise CheckpointError(f"not a readable checkpoint: {path} ({exc.__class__.__name__})"
                               ) from exc
@@ -52,8 +55,13 @@ def load_model(path: str | Path) -> tuple[PointDiffusionTransformer, dict]:
         state = ck["ema"]
     else:
         meta, state = {k: v for k, v in ck.items() if k != "state"}, ck["state"]
-    model = PointDiffusionTransformer(ModelConfig(**meta["model"]))
-    model.load_state_dict(state)
+    if kind is not None and meta.get("kind") != kind:
+        raise CheckpointError(f"{path} holds the {meta.get('kind')} model, not the {kind} model")
+    try:
+        model = PointDiffusionTransformer(ModelConfig(**meta["model"]))
+        model.load_state_dict(state)
+    except (TypeError, RuntimeError) as exc:
+        raise CheckpointError(f"{path}: weights do not match the model they describe") from exc
     model.eval().requires_grad_(False)
     return model, meta
 
@@ -79,13 +87,12 @@ class Prior:
     @classmethod
     def load(cls, base: str | Path | None = None, upsampler: str | Path | None = None,
              with_upsampler: bool = True) -> Prior:
-        """The shipped weights (default) or the given files."""
-        model, _ = load_model(base or BASE_WEIGHTS)
+        """The shipped weights (default) or the given files; the upsampler is loaded when
+        ``with_upsampler`` or a path is given."""
+        model, _ = load_model(base or BASE_WEIGHTS, "base")
         up = None
         if with_upsampler or upsampler is not None:
-            up_path = Path(upsampler or UPSAMPLER_WEIGHTS)
-            if upsampler is not None or up_path.is_file():
-                up, _ = load_model(up_path)
+            up, _ = load_model(upsampler or UPSAMPLER_WEIGHTS, "upsampler")
         return cls(model, up)
 
     # ------------------------------------------------------------------ conditions
@@ -125,7 +132,9 @@ class Prior:
         """``n`` clouds per prompt (or for ``embedding``), classifier-free guided.
 
         ``extra`` adds composed guidance terms ``(prompt or embedding, scale)`` (SPEC 6);
-        ``return_at`` lists timesteps whose x_t is returned (they join the sampler's grid)."""
+        ``return_at`` lists timesteps whose x_t is returned. They join the sampler's strided
+        grid, so a seed gives a slightly different x_0 with and without them (the same one
+        for the same ``return_at``)."""
         conds: list[tuple[torch.Tensor, float]] = []
         if embedding is not None:
             conds.append((embedding.reshape(1, -1).float(), guidance))

@@ -36,6 +36,8 @@ def encode(prompts: list[str] | str) -> torch.Tensor:
     """Unit-norm sentence embeddings, shape ``(len(prompts), 384)``; cached per prompt."""
     if isinstance(prompts, str):
         prompts = [prompts]
+    if not prompts:
+        raise ValueError("no prompts to encode")
     for p in prompts:
         if not isinstance(p, str) or not p.strip():
             raise ValueError("a prompt must be a non-empty string")

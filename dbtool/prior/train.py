@@ -17,7 +17,6 @@ from __future__ import annotations
 import copy
 import json
 import math
-import os
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -25,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from dbtool.atomic import atomic_write, atomic_write_text
 from dbtool.prior import shapes, text
 from dbtool.prior.diffusion import SCALE, Diffusion
 from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
@@ -83,7 +83,7 @@ def resumed_config(run_dir: Path, steps: int | None = None) -> TrainConfig:
     if not ckpt_path.is_file():
         raise FileNotFoundError(f"nothing to resume: {ckpt_path} does not exist")
     try:
-        saved = torch.load(ckpt_path, weights_only=False, map_location="cpu")["config"]
+        saved = torch.load(ckpt_path, weights_only=True, map_location="cpu")["config"]
     except Exception as exc:  # noqa: BLE001 - any unreadable checkpoint gets one message
         raise ValueError(f"not a readable training checkpoint: {ckpt_path}") from exc
     cfg = TrainConfig(**saved)
@@ -93,9 +93,7 @@ def resumed_config(run_dir: Path, steps: int | None = None) -> TrainConfig:
 
 
 def atomic_save(obj, path: Path) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(obj, tmp)
-    os.replace(tmp, path)
+    atomic_write(path, lambda tmp: torch.save(obj, tmp))
 
 
 def load_corpus(cfg: TrainConfig, cache_dir: Path, progress=None):
@@ -115,11 +113,9 @@ def load_corpus(cfg: TrainConfig, cache_dir: Path, progress=None):
     for i, cs in enumerate(caps):
         cap_index[i, : len(cs)] = [pos[c] for c in cs]
     cap_count = np.array([len(cs) for cs in caps], np.int32)
-    cache_dir.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, clouds=clouds.astype(np.float16), labels=labels, captions=np.array(table),
-             cap_index=cap_index, cap_count=cap_count)
-    os.replace(tmp, path)
+    atomic_write(path, lambda tmp: np.savez(
+        tmp, clouds=clouds.astype(np.float16), labels=labels, captions=np.array(table),
+        cap_index=cap_index, cap_count=cap_count))
     return clouds.astype(np.float16), labels, table, list(cap_index), cap_count
 
 
@@ -174,13 +170,20 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path
     gen = torch.Generator().manual_seed(cfg.seed)
     start, elapsed = 0, 0.0
     if ckpt_path.exists():
-        ck = torch.load(ckpt_path, weights_only=False)
+        ck = torch.load(ckpt_path, weights_only=True)
         model.load_state_dict(ck["model"])
         ema.load_state_dict(ck["ema"])
         opt.load_state_dict(ck["opt"])
         rng.bit_generator.state = ck["rng"]
         gen.set_state(ck["gen"])
         start, elapsed = ck["step"], ck["elapsed"]
+        if cfg.steps < start:
+            raise ValueError(f"{run_dir} is already at step {start}; --steps {cfg.steps} "
+                             "would go back")
+    # the loss log holds exactly the steps the checkpoint has seen (a crash after the last
+    # checkpoint leaves rows that the resumed run will write again)
+    kept = [r for r in read_log(run.path) if r.get("step", 0) <= start]
+    atomic_write_text(run.path / "metrics.jsonl", "".join(json.dumps(r) + "\n" for r in kept))
     diff = diffusion_for(cfg.kind)
 
     def save(step: int) -> None:
@@ -239,7 +242,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path
 
 def export_weights(checkpoint: Path, out: Path) -> Path:
     """Write the EMA weights and the model config of a checkpoint as a shippable file."""
-    ck = torch.load(checkpoint, weights_only=False)
+    ck = torch.load(checkpoint, weights_only=True)
     cfg = ck["config"]
     state = {k: v.to(torch.float32) for k, v in ck["ema"].items()}
     log = read_log(checkpoint.parent)

@@ -6,8 +6,6 @@ Headless (Agg); files are written atomically. Clouds are in the prior's frame
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -16,6 +14,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+from dbtool.atomic import atomic_write  # noqa: E402
 
 
 def draw_cloud(ax, cloud: np.ndarray, title: str | None = None, lim: float = 0.55,
@@ -53,15 +53,7 @@ def cloud_grid(clouds: Sequence[np.ndarray], path: str | Path, titles: Sequence[
 
 def save_figure(fig, path: str | Path, dpi: int = 100) -> Path:
     """Save a matplotlib figure atomically (temp file in the same folder, then rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=path.suffix, dir=path.parent)
-    os.close(fd)
     try:
-        fig.savefig(tmp, dpi=dpi)
-        os.replace(tmp, path)
+        return atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi))
     finally:
         plt.close(fig)
-        if os.path.exists(tmp):
-            os.remove(tmp)
-    return path

@@ -5,8 +5,6 @@ Headless: the Agg backend, nothing is shown on screen; files are written atomica
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import matplotlib
@@ -14,6 +12,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+from dbtool.atomic import atomic_write  # noqa: E402
 
 GROUP_COLOURS = ("#d62728", "#1f77b4", "#2ca02c", "#9467bd")
 BODY, OBJECT, INACTIVE = "#ff9f1c", "#7f7f7f", None
@@ -67,17 +67,7 @@ def _box(ax, c: np.ndarray, h: np.ndarray) -> None:
 
 
 def _atomic_save(fig_or_writer, path: Path, save) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        save(tmp)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-    return path
+    return atomic_write(path, save)
 
 
 def montage(ep, positions: np.ndarray, path, frames: int = 6, max_points: int = 6000,
