@@ -26,7 +26,7 @@ def save_ply(points: np.ndarray, path: str | Path) -> Path:
     header = ("ply\nformat binary_little_endian 1.0\ncomment dbtool point cloud, y up\n"
               f"element vertex {len(pts)}\nproperty float x\nproperty float y\n"
               "property float z\nend_header\n").encode()
-    return atomic_write_bytes(header + pts.tobytes(), Path(path))
+    return atomic_write_bytes(path, header + pts.tobytes())
 
 
 def load_ply(path: str | Path) -> np.ndarray:
@@ -50,4 +50,4 @@ def save_npz(path: str | Path, **arrays: np.ndarray) -> Path:
     """Write arrays to an ``.npz`` atomically."""
     buf = io.BytesIO()
     np.savez(buf, **arrays)
-    return atomic_write_bytes(buf.getvalue(), Path(path))
+    return atomic_write_bytes(path, buf.getvalue())
