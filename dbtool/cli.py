@@ -220,7 +220,8 @@ def generate(
     prompts: list[str] = typer.Argument(..., help="one or more text prompts, e.g. \"a star\""),
     n: int = typer.Option(8, "-n", min=1, help="samples per prompt"),
     guidance: float = typer.Option(3.0, help="classifier-free guidance scale (Point-E uses 3)"),
-    steps: int = typer.Option(64, min=1, help="DDIM sampling steps"),
+    steps: int = typer.Option(64, min=1, help="sampling steps (strided over the 1,024)"),
+    eta: float = typer.Option(1.0, min=0.0, max=1.0, help="1: strided DDPM, 0: DDIM"),
     seed: int = typer.Option(0, help="seed of the initial noise"),
     upsample: bool = typer.Option(False, "--upsample", help="densify to 4,096 points"),
     base: Path = typer.Option(None, help="base model weights (default: the shipped ones)"),
@@ -233,7 +234,7 @@ def generate(
     from dbtool.prior.generate import generate as run_generate
     from dbtool.prior.pipeline import Prior
 
-    settings = GenerateSettings(n, guidance, steps, seed, upsample)
+    settings = GenerateSettings(n, guidance, steps, seed, upsample, eta)
     out = out or Path("runs") / f"generate-{time.strftime('%Y%m%d-%H%M%S')}"
     try:
         if any(not p.strip() for p in prompts):

@@ -255,3 +255,18 @@ def test_evaluation_runs_every_part():
     assert 0.0 <= res["accuracy"] <= 1.0 and res["ceiling"] > 0.9
     assert res["paraphrases"] and len(res["interpolations"]) == 3
     assert all(len(it["path"]) == 7 for it in res["interpolations"])
+
+
+def test_chamfer_matrix_matches_the_definition():
+    from dbtool.prior.metrics import chamfer_matrix, one_nna
+
+    g = torch.Generator().manual_seed(0)
+    a, b = torch.rand(3, 50, 3, generator=g), torch.rand(7, 40, 3, generator=g)
+    d = chamfer_matrix(a, b, budget=5000)  # several blocks
+    for i in range(3):
+        for j in range(7):
+            sq = ((a[i][:, None] - b[j][None]) ** 2).sum(-1)
+            want = sq.min(1).values.mean() + sq.min(0).values.mean()
+            assert d[i, j].item() == pytest.approx(want.item(), rel=1e-4, abs=1e-7)
+    assert torch.allclose(torch.diagonal(chamfer_matrix(a, a)), torch.zeros(3), atol=1e-6)
+    assert one_nna(a, a + 10.0) == 1.0  # two far-apart sets are fully separable

@@ -68,6 +68,24 @@ def _quality_rows(ev: dict) -> list[str]:
     return rows
 
 
+def _measured_limits(ev: dict) -> list[str]:
+    """Weak spots read off the evaluation: distinguishability, diversity, failed paraphrases."""
+    fams = ev["families"]
+    nna = [r["one_nna"] for r in fams.values()]
+    low = sorted(fams, key=lambda f: fams[f]["spread_ratio"])[:4]
+    out = [f"- Generated sets are still told apart from real shapes: 1-NNA "
+           f"{min(nna):.2f}-{max(nna):.2f} per family (0.5 would be indistinguishable). Surfaces "
+           "are softer than the meshes' and thin parts (star arms, legs) are rounder.",
+           "- Diversity is below the corpus's: spread ratio "
+           + ", ".join(f"{f} {fams[f]['spread_ratio']:.2f}" for f in low)
+           + " for the least varied families (no family collapses to one shape)."]
+    bad = [p for p, r in ev.get("paraphrases", {}).items() if r["accuracy"] < 0.5]
+    if bad:
+        out.append("- Paraphrases that miss their family: " + ", ".join(f'"{p}"' for p in bad)
+                   + ".")
+    return out
+
+
 def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None) -> str:
     """The card's markdown."""
     s = ev["settings"]
@@ -101,7 +119,8 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None) 
         "the same time on the two cores.", "",
         *_training_rows({"base": base_meta, **({"upsampler": up_meta} if up_meta else {})}), "",
         "## Quality", "",
-        f"Settings: {s['samples']} samples per family from its prompt, DDIM {s['steps']} steps, "
+        f"Settings: {s['samples']} samples per family from its prompt, "
+        f"{'strided DDPM' if s.get('eta', 0) == 1 else 'DDIM'} with {s['steps']} steps, "
         f"guidance {s['guidance']}, seed {s['seed']}; Chamfer on {s['metric_points']} points. "
         "A sample is correct when its single nearest reference shape (Chamfer) belongs to the "
         "prompted family (1-NN accuracy); the ceiling is the same rule applied to real "
@@ -147,9 +166,10 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None) 
         "dbtool prior export runs/prior/upsampler -o dbtool/prior/weights/upsampler.pt",
         "dbtool prior evaluate --out runs/prior/eval.json",
         "python benchmarks/prior.py",
-        "python -m dbtool.prior.card runs/prior/eval.json",
+        "python -m dbtool.prior.card runs/prior/eval.json  # shipped as weights/eval.json",
         "```", "",
         "## Limits", "",
+        *_measured_limits(ev),
         "- The corpus is procedural: the model knows these families and mixtures of them, not "
         "the open vocabulary of Point-E. Prompts far from every family give blends.",
         "- Orientation is canonical (y up); the model does not produce rotated variants.",

@@ -37,10 +37,10 @@ PARAPHRASES: dict[str, tuple[str, ...]] = {
 INTERPOLATIONS = (("ball", "star"), ("bar", "ring"), ("table", "pyramid"))  # family pairs
 
 
-def real_set(split: str, per_family: int, families: list[str], seed: int = 0
-             ) -> tuple[torch.Tensor, np.ndarray]:
+def real_set(split: str, per_family: int, families: list[str], seed: int = 0,
+             points: int = METRIC_POINTS) -> tuple[torch.Tensor, np.ndarray]:
     clouds, labels, _ = shapes.make_corpus(per_family, split, seed, 1024, families)
-    return subsample(clouds, METRIC_POINTS, seed=1), labels
+    return subsample(clouds, points, seed=1), labels
 
 
 def family_index(name: str) -> int:
@@ -59,11 +59,13 @@ def prompt_of(family: str) -> str:
 def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
              steps: int = 64, guidance: float = 3.0, seed: int = 0, paraphrases: bool = True,
              interpolate: bool = True, progress=print, reference_families: list[str] | None
-             = None) -> dict:
+             = None, eta: float = 1.0, heldout_per_family: int = HELDOUT_PER_FAMILY,
+             metric_points: int = METRIC_POINTS) -> dict:
     """All quality metrics of the issue; numbers per family and overall.
 
-    ``families`` are the families prompted; the reference and held-out sets cover
-    ``reference_families`` (default: every family), so a sample can be mistaken for any of them.
+    ``families`` are the families prompted; the reference set covers ``reference_families``
+    (default: every family), so a sample can be mistaken for any of them. The ceiling is the
+    same 1-NN rule applied to real held-out shapes of the prompted families.
     """
     fams = families or list(shapes.FAMILIES)
     ref_fams = reference_families or list(shapes.FAMILIES)
@@ -71,18 +73,18 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
     if missing:
         raise ValueError(f"families without references: {', '.join(sorted(missing))}")
     t0 = time.perf_counter()
-    ref, ref_lab = real_set("reference", REF_PER_FAMILY, ref_fams)
-    held, held_lab = real_set("heldout", HELDOUT_PER_FAMILY, ref_fams)
+    ref, ref_lab = real_set("reference", REF_PER_FAMILY, ref_fams, points=metric_points)
+    held, held_lab = real_set("heldout", heldout_per_family, fams, points=metric_points)
     ceiling = one_nn_accuracy(chamfer_matrix(held, ref), held_lab, ref_lab)
     res: dict = {"families": {}, "settings": {
-        "samples": samples, "steps": steps, "guidance": guidance, "seed": seed,
-        "reference_per_family": REF_PER_FAMILY, "heldout_per_family": HELDOUT_PER_FAMILY,
-        "metric_points": METRIC_POINTS}}
+        "samples": samples, "steps": steps, "guidance": guidance, "seed": seed, "eta": eta,
+        "reference_per_family": REF_PER_FAMILY, "heldout_per_family": heldout_per_family,
+        "metric_points": metric_points}}
     accs = []
     for k, fam in enumerate(fams):
         prompt = prompt_of(fam)
-        gen = prior.sample(prompt, samples, guidance, steps, seed + k).clouds
-        g = subsample(gen, METRIC_POINTS, seed=2)
+        gen = prior.sample(prompt, samples, guidance, steps, seed + k, eta=eta).clouds
+        g = subsample(gen, metric_points, seed=2)
         acc = one_nn_accuracy(chamfer_matrix(g, ref), np.full(samples, family_index(fam)),
                               ref_lab)
         real = held[held_lab == family_index(fam)]
@@ -105,8 +107,9 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
         for i, (prompt, ok) in enumerate(PARAPHRASES.items()):
             if not set(ok) <= set(ref_fams):
                 continue
-            g = subsample(prior.sample(prompt, samples, guidance, steps, seed + 100 + i).clouds,
-                          METRIC_POINTS, seed=2)
+            g = subsample(prior.sample(prompt, samples, guidance, steps, seed + 100 + i,
+                                       eta=eta).clouds,
+                          metric_points, seed=2)
             nn = ref_lab[chamfer_matrix(g, ref).argmin(1).numpy()]
             hit = np.isin(nn, [family_index(f) for f in ok])
             para[prompt] = {"families": list(ok), "accuracy": float(hit.mean())}
@@ -115,7 +118,8 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
         res["paraphrases"] = para
         res["paraphrase_accuracy"] = float(np.mean([p["accuracy"] for p in para.values()]))
     if interpolate:
-        res["interpolations"] = [interpolation(prior, a, b, ref, ref_lab, steps, guidance, seed)
+        res["interpolations"] = [interpolation(prior, a, b, ref, ref_lab, steps, guidance, seed,
+                                               eta=eta)
                                  for a, b in INTERPOLATIONS if {a, b} <= set(ref_fams)]
     res["seconds"] = time.perf_counter() - t0
     return res
@@ -130,7 +134,8 @@ def slerp(a: torch.Tensor, b: torch.Tensor, u: float) -> torch.Tensor:
 
 
 def interpolation(prior: Prior, fam_a: str, fam_b: str, ref, ref_lab, steps: int,
-                  guidance: float, seed: int, n: int = 7, samples: int = 8) -> dict:
+                  guidance: float, seed: int, n: int = 7, samples: int = 8,
+                  eta: float = 1.0) -> dict:
     """Share of samples whose nearest reference is family A or B along the slerp between the
     embeddings of their prompts."""
     a, b = prompt_of(fam_a), prompt_of(fam_b)
@@ -140,7 +145,7 @@ def interpolation(prior: Prior, fam_a: str, fam_b: str, ref, ref_lab, steps: int
     for u in np.linspace(0, 1, n):
         e = slerp(ea, eb, float(u))
         g = subsample(prior.sample(embedding=e, n=samples, guidance=guidance, steps=steps,
-                                   seed=seed).clouds, METRIC_POINTS, seed=2)
+                                   seed=seed, eta=eta).clouds, ref.shape[1], seed=2)
         nn = ref_lab[chamfer_matrix(g, ref).argmin(1).numpy()]
         rows.append({"u": float(u), "share_a": float((nn == fa).mean()),
                      "share_b": float((nn == fb).mean())})

@@ -30,6 +30,7 @@ class GenerateSettings:
     steps: int = 64
     seed: int = 0
     upsample: bool = False
+    eta: float = 1.0  # 1: strided DDPM, 0: DDIM
 
 
 def slug(prompt: str) -> str:
@@ -47,7 +48,7 @@ def generate(prior: Prior, prompts: list[str], settings: GenerateSettings, out: 
         raise ValueError("-n and --steps must be at least 1")
     t0 = time.perf_counter()
     res = prior.sample(prompts, settings.n, settings.guidance, settings.steps, settings.seed,
-                       upsample=settings.upsample)
+                       upsample=settings.upsample, eta=settings.eta)
     seconds = time.perf_counter() - t0
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

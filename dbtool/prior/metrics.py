@@ -25,21 +25,23 @@ def subsample(clouds: np.ndarray, n: int, seed: int = 0) -> torch.Tensor:
     return torch.from_numpy(np.take_along_axis(clouds, idx[..., None], 1))
 
 
-def chamfer_matrix(a: torch.Tensor, b: torch.Tensor, max_pairs: int = 96) -> torch.Tensor:
+def chamfer_matrix(a: torch.Tensor, b: torch.Tensor, budget: int = 2**25) -> torch.Tensor:
     """Symmetric Chamfer distance (mean squared nearest-neighbour distance, both ways) between
-    every cloud of ``a`` (A, N, 3) and every cloud of ``b`` (B, M, 3): ``(A, B)``. Works on
-    ``max_pairs`` cloud pairs at a time to bound memory."""
+    every cloud of ``a`` (A, N, 3) and every cloud of ``b`` (B, M, 3): ``(A, B)``. Blocks of
+    cloud pairs are evaluated together, at most ``budget`` point-pair distances at a time."""
+    n, m = a.shape[1], b.shape[1]
     out = torch.empty(a.shape[0], b.shape[0])
-    bb = (b * b).sum(-1)  # (B, M)
+    aa, bb = (a * a).sum(-1), (b * b).sum(-1)
+    cb = max(1, min(b.shape[0], budget // (n * m)))
+    ca = max(1, budget // (n * m * cb))
     with torch.no_grad():
-        for i in range(a.shape[0]):
-            ai = a[i]
-            aa = (ai * ai).sum(-1)  # (N,)
-            for j in range(0, b.shape[0], max_pairs):
-                bj = b[j: j + max_pairs]
-                d = (aa[None, :, None] + bb[j: j + max_pairs, None, :]
-                     - 2 * torch.einsum("nd,bmd->bnm", ai, bj)).clamp(min=0)
-                out[i, j: j + max_pairs] = d.min(2).values.mean(1) + d.min(1).values.mean(1)
+        for i in range(0, a.shape[0], ca):
+            ai = a[i: i + ca]
+            for j in range(0, b.shape[0], cb):
+                bj = b[j: j + cb]
+                d = (aa[i: i + ca, None, :, None] + bb[None, j: j + cb, None, :]
+                     - 2 * torch.einsum("and,cmd->acnm", ai, bj)).clamp_(min=0)
+                out[i: i + ca, j: j + cb] = d.min(3).values.mean(2) + d.min(2).values.mean(2)
     return out
 
 

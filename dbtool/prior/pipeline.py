@@ -128,10 +128,11 @@ class Prior:
                guidance: float = 3.0, steps: int = 64, seed: int = 0,
                embedding: torch.Tensor | None = None, extra: Sequence[tuple[str | torch.Tensor,
                float]] = (), return_at: Sequence[int] = (), upsample: bool = False,
-               points: int = COARSE_POINTS, eta: float = 0.0) -> Samples:
+               points: int = COARSE_POINTS, eta: float = 1.0) -> Samples:
         """``n`` clouds per prompt (or for ``embedding``), classifier-free guided.
 
-        ``eta`` = 0 is DDIM, 1 strided DDPM. ``extra`` adds composed guidance terms
+        ``eta`` = 1 (default) is strided DDPM, 0 is DDIM; DDPM gave sharper samples
+        (``MODEL_CARD.md``). ``extra`` adds composed guidance terms
         ``(prompt or embedding, scale)`` (SPEC 6);
         ``return_at`` lists timesteps whose x_t is returned. They join the sampler's strided
         grid, so a seed gives a slightly different x_0 with and without them (the same one
