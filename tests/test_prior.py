@@ -250,7 +250,8 @@ def test_evaluation_runs_every_part():
     assert prompt_of("bar") == "a bar" and prompt_of("wings") == "a pair of wings"
     prior = Prior(tiny_model(), bf16=False)
     res = evaluate(prior, ["ball", "star"], samples=2, steps=2, progress=None,
-                   reference_families=["ball", "star", "bar", "ring", "table", "pyramid"])
+                   reference_families=["ball", "star", "bar", "ring", "table", "pyramid"],
+                   heldout_per_family=4, metric_points=128)
     assert set(res["families"]) == {"ball", "star"}
     assert 0.0 <= res["accuracy"] <= 1.0 and res["ceiling"] > 0.9
     assert res["paraphrases"] and len(res["interpolations"]) == 3
