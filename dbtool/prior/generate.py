@@ -39,11 +39,15 @@ def slug(prompt: str) -> str:
     return s[:40] or "prompt"
 
 
+def check_prompts(prompts: list[str]) -> None:
+    """Refuse empty prompts (before any model is loaded)."""
+    if not prompts or any(not p.strip() for p in prompts):
+        raise ValueError("the prompt is empty: say what to generate, e.g. \"a star\"")
+
+
 def generate(prior: Prior, prompts: list[str], settings: GenerateSettings, out: Path) -> dict:
     """Sample ``settings.n`` clouds per prompt, write them to ``out``; return a summary."""
-    for p in prompts:
-        if not p.strip():
-            raise ValueError("the prompt is empty: say what to generate, e.g. \"a star\"")
+    check_prompts(prompts)
     if settings.n < 1 or settings.steps < 1:
         raise ValueError("-n and --steps must be at least 1")
     t0 = time.perf_counter()

@@ -242,8 +242,14 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path
 
 def export_weights(checkpoint: Path, out: Path) -> Path:
     """Write the EMA weights and the model config of a checkpoint as a shippable file."""
-    ck = torch.load(checkpoint, weights_only=True)
-    cfg = ck["config"]
+    if not Path(checkpoint).is_file():
+        raise ValueError(f"checkpoint not found: {checkpoint}")
+    try:
+        ck = torch.load(checkpoint, weights_only=True, map_location="cpu")
+        cfg = ck["config"]
+        ck["ema"], ck["step"], ck["elapsed"]  # noqa: B018 - the fields a weights file needs
+    except Exception as exc:  # noqa: BLE001 - any unreadable checkpoint gets one message
+        raise ValueError(f"not a dbtool training checkpoint: {checkpoint}") from exc
     state = {k: v.to(torch.float32) for k, v in ck["ema"].items()}
     log = read_log(checkpoint.parent)
     tail = [r["loss"] for r in log[-20:]]  # the last 20 logged windows (500 steps by default)
