@@ -330,6 +330,7 @@ class Shape:
     family: str
     captions: list[str]
     points: np.ndarray  # (n, 3) float32
+    mesh: trimesh.Trimesh | None = None  # the solid, in the same normalised frame
 
     @property
     def caption(self) -> str:
@@ -342,9 +343,11 @@ def to_trimesh(solid: Manifold) -> trimesh.Trimesh:
                            np.asarray(mesh.tri_verts), process=False)
 
 
-def normalise(points: np.ndarray) -> np.ndarray:
-    """Centre on the bounding box and scale the largest side to 1."""
-    lo, hi = points.min(0), points.max(0)
+def normalise(points: np.ndarray, reference: np.ndarray | None = None) -> np.ndarray:
+    """Centre on the bounding box of ``reference`` (default: the points) and scale its largest
+    side to 1."""
+    ref = points if reference is None else reference
+    lo, hi = ref.min(0), ref.max(0)
     return (points - (lo + hi) / 2) / max(float((hi - lo).max()), 1e-9)
 
 
@@ -360,8 +363,10 @@ def make_shape(family: str, index: int, split: str = "train", seed: int = 0,
         raise RuntimeError(f"shape family {family!r} built an empty solid")
     mesh = to_trimesh(solid)
     pts, _ = trimesh.sample.sample_surface(mesh, n_points, seed=int(rng.integers(2**31)))
-    pts = normalise(np.asarray(pts)).astype(np.float32)
-    return Shape(family, captions(names), pts)
+    pts = np.asarray(pts)
+    verts = normalise(np.asarray(mesh.vertices), pts)
+    mesh = trimesh.Trimesh(verts, mesh.faces, process=False)
+    return Shape(family, captions(names), normalise(pts).astype(np.float32), mesh)
 
 
 def make_corpus(per_family: int, split: str = "train", seed: int = 0, n_points: int = 1024,

@@ -8,8 +8,8 @@ solves Poisson's equation ``lap(chi) = div(v)``. In Fourier space, with angular 
     chi_hat(w) = -i (w . v_hat(w)) G(w) / |w|^2,   chi_hat(0) = 0
     G(w) = exp(-(sigma |w| / res)^2 / 2)           (Gaussian smoothing, sigma in grid cells)
 
-``chi`` is then shifted so its mean over the input points is 0 (the surface is the 0 level)
-and scaled so the grid's corner (far from the shape) is +0.5. With outward normals the
+``chi`` is then shifted so its (weighted) mean over the input points is 0 (the surface is the
+0 level) and scaled so the grid's corner (far from the shape) is +0.5. With outward normals the
 inside is negative. Every step is a torch operation, so ``chi`` is differentiable with respect
 to the point positions (through the splat weights) and the normals.
 """
@@ -70,15 +70,19 @@ def _frequencies(res: int, dtype, device) -> torch.Tensor:
 
 
 def poisson_indicator(points: torch.Tensor, normals: torch.Tensor, res: int = 64,
-                      sigma: float = 2.0) -> torch.Tensor:
+                      sigma: float = 2.0, weights: torch.Tensor | None = None) -> torch.Tensor:
     """The normalised indicator grid ``(B, res, res, res)`` of oriented points (module doc).
 
     ``points`` ``(B, N, 3)`` must lie in ``[0, 1)`` (leave a margin: the grid is periodic);
     ``normals`` ``(B, N, 3)`` point outward. ``sigma`` is the smoothing width in grid cells.
+    ``weights`` ``(B, N)`` (default 1) scale each point's normal in the splat and its vote for
+    the 0 level; a point of weight 0 does not shape the surface at all.
     """
     if points.shape != normals.shape or points.dim() != 3 or points.shape[-1] != 3:
         raise ValueError("points and normals must both have shape (B, N, 3)")
-    v = splat(points, normals, res)  # (B, 3, r, r, r)
+    if weights is None:
+        weights = torch.ones(points.shape[:2], dtype=points.dtype, device=points.device)
+    v = splat(points, normals * weights[..., None], res)  # (B, 3, r, r, r)
     v_hat = torch.fft.rfftn(v, dim=(2, 3, 4))
     w = _frequencies(res, points.dtype, points.device)  # (r, r, r/2+1, 3)
     w2 = (w**2).sum(-1)
@@ -87,6 +91,7 @@ def poisson_indicator(points: torch.Tensor, normals: torch.Tensor, res: int = 64
     chi_hat = -1j * div * gauss / torch.where(w2 > 0, w2, torch.ones_like(w2))
     chi_hat = torch.where(w2 > 0, chi_hat, torch.zeros_like(chi_hat))
     chi = torch.fft.irfftn(chi_hat, s=(res, res, res), dim=(1, 2, 3))
-    chi = chi - sample(chi, points).mean(1).view(-1, 1, 1, 1)  # surface at level 0
+    level = (sample(chi, points) * weights).sum(1) / weights.sum(1).clamp_min(1e-12)
+    chi = chi - level.view(-1, 1, 1, 1)  # surface at level 0
     corner = chi[:, 0, 0, 0].abs().clamp_min(1e-12)
     return 0.5 * chi / corner.view(-1, 1, 1, 1)

@@ -1,0 +1,207 @@
+"""The robotizer Psi (SPEC section 2): cloud x -> Robot, and the chain rule back to x.
+
+``robotize(x, task)`` runs, in torch:
+
+1. validation of the cloud (:func:`check_cloud`);
+2. oriented normals: local PCA, flipped out of a flood-filled coarse solid
+   (:mod:`dbtool.robotize.normals`);
+3. the robust step: planarity-blended normals and IRLS point weights
+   (:mod:`dbtool.robotize.robust`) around DPSR (:mod:`dbtool.robotize.dpsr`);
+4. placement into the task's design workspace and smooth occupancy on its particle lattice,
+   largest connected component, minimum-volume guard (:mod:`dbtool.robotize.solid`);
+5. stiffness (:mod:`dbtool.robotize.stiffness`) and actuator groups by k-means of the centred
+   local coordinates along the task's axes, ordered by the task's documented key
+   (:func:`dbtool.sim.actuators.cluster_actuators`).
+
+The returned :class:`Robotized` keeps the torch graph from x to the occupancy, so
+:meth:`Robotized.vjp` turns the simulator's d metric / d occupancy into d metric / d x.
+Actuator labels, the placement and the component mask are piecewise constant in x and pass no
+gradient; neither does the ``depth`` stiffness.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from dbtool.robotize import normals as N
+from dbtool.robotize.dpsr import poisson_indicator
+from dbtool.robotize.robust import blend_normals, deflate, distances, noise_level, reweight
+from dbtool.robotize.solid import (
+    DOMAIN,
+    SPAN,
+    Placement,
+    grid_solid_box,
+    largest_component,
+    occupancy,
+    surface_slope,
+    to_unit,
+)
+from dbtool.robotize.stiffness import stiffness as stiffness_map
+from dbtool.sim.actuators import cluster_actuators
+from dbtool.sim.robot import OCCUPANCY_THRESHOLD, Robot
+from dbtool.sim.tasks import Task
+from dbtool.sim.tasks.base import SPACING
+
+MIN_POINTS = 50
+FAR = 1.0  # a cloud whose median |x| (max-norm) exceeds this is not in the prior's frame
+MIN_PARTICLES = 100  # minimum-volume guard on the kept component
+METHODS = ("dpsr", "direct_sdf")
+
+
+class RobotizeError(ValueError):
+    """The cloud cannot become a robot (degenerate input or an empty/too small solid)."""
+
+
+@dataclass(frozen=True)
+class RobotizeConfig:
+    """Settings of Psi. ``res``/``sigma``: DPSR grid and smoothing (cells); ``k``: PCA
+    neighbours; ``orient_res``: coarse grid of the orientation fill; ``robust_iters``:
+    reweighting passes (0 = plain DPSR); ``softness``: occupancy ramp in lattice spacings;
+    ``stiffness``: ``constant`` or ``depth``."""
+
+    res: int = 128
+    sigma: float = 1.5
+    k: int = 16
+    orient_res: int = 32
+    robust_iters: int = 2
+    robust_scale: float = 2.0
+    noise_gain: float = 0.5
+    clean_floor: float = 0.5
+    deflate: bool = True
+    softness: float = 0.5
+    stiffness: str = "constant"
+    min_particles: int = MIN_PARTICLES
+
+
+@dataclass
+class Robotized:
+    """A robot and what produced it: the graph from ``x`` (a torch leaf) to ``occupancy``."""
+
+    robot: Robot
+    x: torch.Tensor
+    occupancy: torch.Tensor
+    placement: Placement
+    chi: np.ndarray
+    weights: np.ndarray
+    normals: np.ndarray
+    noise: float
+
+    def vjp(self, d_occupancy: np.ndarray) -> np.ndarray:
+        """d metric / d x from d metric / d occupancy (one value per lattice particle)."""
+        g = torch.as_tensor(np.asarray(d_occupancy), dtype=self.occupancy.dtype)
+        (gx,) = torch.autograd.grad(self.occupancy, self.x, g, retain_graph=True,
+                                    allow_unused=True)
+        return np.zeros(self.x.shape) if gx is None else gx.detach().numpy().astype(float)
+
+
+def check_cloud(x) -> np.ndarray:
+    """The cloud as ``(N, 3)`` float64, or :class:`RobotizeError` saying what is wrong."""
+    a = np.asarray(x, dtype=float)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise RobotizeError(f"a cloud must have shape (N, 3), got {a.shape}")
+    if len(a) < MIN_POINTS:
+        raise RobotizeError(f"the cloud has {len(a)} points; at least {MIN_POINTS} are needed")
+    if not np.all(np.isfinite(a)):
+        raise RobotizeError("the cloud contains NaN or infinite coordinates")
+    if np.ptp(a, axis=0).max() < 1e-3:
+        raise RobotizeError("all points of the cloud are (nearly) identical")
+    if np.median(np.abs(a).max(1)) > FAR:
+        raise RobotizeError("the cloud lies far outside the unit cube [-0.5, 0.5]^3 of the "
+                            "prior's frame; normalise it first")
+    if np.sum(np.abs(a).max(1) <= DOMAIN) < MIN_POINTS:
+        raise RobotizeError(f"fewer than {MIN_POINTS} points lie within |x| <= {DOMAIN}")
+    return a
+
+
+def lattice_dims(task: Task) -> tuple[int, int, int]:
+    return tuple(int(round(w / SPACING)) for w in task.design_workspace())  # type: ignore
+
+
+def indicator(x: torch.Tensor, cfg: RobotizeConfig, noise: float | None = None):
+    """Steps 2-3: the DPSR indicator grid of cloud ``x`` (prior frame, torch), with the unit
+    coordinates, weights, oriented normals and the estimated noise level."""
+    inside = (x.detach().abs() <= DOMAIN).all(1)
+    if noise is not None and cfg.deflate:
+        x = deflate(x, noise, inside)
+    prior_w = inside.to(x.dtype)
+    unit = to_unit(x.clamp(-DOMAIN, DOMAIN))
+    n_pca, planarity = N.pca_normals(x, cfg.k)
+    n_pca, outward = N.orient(n_pca, unit.detach().numpy(), prior_w.numpy(), cfg.orient_res)
+    cell = SPAN / cfg.res  # prior-frame width of a DPSR cell
+    chi = poisson_indicator(unit[None], n_pca[None], cfg.res, cfg.sigma, prior_w[None])[0]
+    d = distances(chi, unit, surface_slope(chi, unit, prior_w))
+    if noise is None:
+        noise = noise_level(d, inside, cfg.clean_floor * cell)
+    noise = torch.as_tensor(noise, dtype=x.dtype)
+    if cfg.robust_iters == 0:
+        return chi, unit, prior_w, n_pca, noise
+    n = blend_normals(n_pca, planarity, torch.as_tensor(outward, dtype=x.dtype))
+    sigma = torch.sqrt(cfg.sigma**2 + (cfg.noise_gain * noise / cell) ** 2)
+    chi, w = reweight(unit, n, prior_w, cfg.res, sigma, lambda c, ww: surface_slope(c, unit, ww),
+                      cfg.robust_iters, cfg.robust_scale, cfg.clean_floor * cell)
+    return chi, unit, w, n, noise
+
+
+def robotize(x, task: Task, cfg: RobotizeConfig | None = None, noise: float | None = None,
+             method: str = "dpsr", dtype: torch.dtype = torch.float64) -> Robotized:
+    """Psi: the robot of cloud ``x`` (prior frame) on ``task``'s design lattice.
+
+    ``noise``: the std of the Gaussian noise in ``x`` (prior frame) when it is known, e.g.
+    ``noise_std(t)`` for a diffusion sample x_t; ``None`` estimates it. ``method``: ``dpsr``
+    (this module) or ``direct_sdf`` (the Figure 8 baseline, :mod:`dbtool.robotize.direct_sdf`).
+    """
+    cfg = cfg or RobotizeConfig()
+    if method not in METHODS:
+        raise RobotizeError(f"unknown robotizing method {method!r}; choose one of "
+                            f"{', '.join(METHODS)}")
+    xt = torch.tensor(check_cloud(x), dtype=dtype, requires_grad=True)
+    if method == "direct_sdf":
+        from dbtool.robotize.direct_sdf import direct_occupancy
+
+        occ, place, w, n = direct_occupancy(xt, task, cfg)
+        active = occ.detach().numpy() >= OCCUPANCY_THRESHOLD
+        return _assemble(task, cfg, xt, occ, active, place, np.zeros(0), w, n, 0.0)
+    chi, unit, w, n, noise = indicator(xt, cfg, noise)
+    chi_np = chi.detach().numpy()
+    lo, hi, cells = grid_solid_box(chi_np)
+    if cells == 0:
+        raise RobotizeError("the reconstructed solid is empty (no inside found)")
+    place = Placement.fit(lo, hi, task.design_workspace(), hang=task.name == "gripping")
+    pts = task.design_points()
+    slope = surface_slope(chi, unit, w)
+    q_prior = torch.as_tensor(place.to_prior(pts), dtype=dtype)
+    occ = occupancy(chi, slope, q_prior, SPACING / place.scale, cfg.softness)
+    active = (occ.detach().numpy() >= OCCUPANCY_THRESHOLD).reshape(lattice_dims(task))
+    keep = largest_component(active).ravel()
+    drop = torch.as_tensor(active.ravel() & ~keep)
+    occ = torch.where(drop, torch.zeros_like(occ), occ)
+    return _assemble(task, cfg, xt, occ, keep, place, chi_np, w, n, float(noise.detach()))
+
+
+def _assemble(task: Task, cfg: RobotizeConfig, xt: torch.Tensor, occ: torch.Tensor,
+              keep: np.ndarray, place: Placement, chi: np.ndarray, w: torch.Tensor,
+              n: torch.Tensor, noise: float) -> Robotized:
+    """Steps 4-5 shared by both methods: volume guard, stiffness, actuator groups."""
+    n_keep = int(keep.sum())
+    if n_keep < cfg.min_particles:
+        raise RobotizeError(f"the reconstructed solid is too small: {n_keep} particles "
+                            f"(at least {cfg.min_particles} are needed)")
+    pts = task.design_points()
+    stiff = stiffness_map(cfg.stiffness, keep, lattice_dims(task), SPACING)
+    robot = Robot(pts, occ.detach().numpy().astype(float), stiff,
+                  np.zeros((len(pts), task.n_groups)),
+                  np.tile(task.direction, (task.n_groups, 1)).reshape(task.n_groups, 3))
+    if task.n_groups:
+        robot.actuators = cluster_actuators(pts, keep, task.n_groups, task.cluster_axes,
+                                            task.group_order)
+    return Robotized(robot, xt, occ, place, chi, w.detach().numpy(), n.detach().numpy(), noise)
+
+
+def noise_std(t: int, schedule: str = "cosine") -> float:
+    """Std of the noise in x_t, in the prior's frame (the model space is scaled by 2)."""
+    from dbtool.prior.diffusion import SCALE, Diffusion
+
+    return float((1.0 - Diffusion(schedule).abar[t]) ** 0.5) / SCALE
