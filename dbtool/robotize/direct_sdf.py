@@ -42,7 +42,7 @@ def direct_occupancy(x: torch.Tensor, task: Task, cfg):
     live = (x.detach().abs() <= DOMAIN).all(1)
     xl = x[live]
     n, _ = N.pca_normals(xl, cfg.k)
-    n, _ = N.orient(n, to_unit(xl).detach().numpy(), np.ones(len(xl)), cfg.orient_res)
+    n, _ = N.orient(n, to_unit(xl), np.ones(len(xl)), cfg.orient_res)
     lo, hi = xl.detach().min(0).values.numpy(), xl.detach().max(0).values.numpy()
     place = Placement.fit(lo, hi, task.design_workspace(), hang=task.name == "gripping")
     pts = task.design_points()

@@ -80,25 +80,38 @@ def inside_field(unit: np.ndarray, weights: np.ndarray, res: int = 32,
     return ndimage.gaussian_filter(solid.astype(float), 1.0, mode="constant")
 
 
-def field_gradient(field: np.ndarray, unit: np.ndarray) -> np.ndarray:
-    """``grad F`` (central differences, trilinearly interpolated) at points ``(N, 3)``."""
+def field_gradient(field: np.ndarray, unit: torch.Tensor) -> torch.Tensor:
+    """``grad F`` (central differences, trilinearly interpolated, clamped at the border) at
+    points ``(N, 3)`` in ``[0, 1)``; differentiable in the positions. Cell ``i`` of ``F`` is
+    centred at ``(i + 0.5) / res``."""
     res = field.shape[0]
-    grads = np.gradient(field)
-    coords = (unit * res - 0.5).T
-    return np.stack([ndimage.map_coordinates(g, coords, order=1, mode="nearest")
-                     for g in grads], 1)
+    grads = torch.as_tensor(np.stack(np.gradient(field)), dtype=unit.dtype).reshape(3, -1)
+    c = (unit * res - 0.5).clamp(0.0, res - 1.0 - 1e-9)
+    base = torch.floor(c.detach()).long()
+    f = c - base
+    out = torch.zeros_like(unit)
+    for dx in (0, 1):
+        for dy in (0, 1):
+            for dz in (0, 1):
+                node = (base + torch.tensor([dx, dy, dz])).clamp(max=res - 1)
+                flat = (node[:, 0] * res + node[:, 1]) * res + node[:, 2]
+                w = ((f[:, 0] if dx else 1 - f[:, 0]) * (f[:, 1] if dy else 1 - f[:, 1])
+                     * (f[:, 2] if dz else 1 - f[:, 2]))
+                out = out + w[:, None] * grads[:, flat].T
+    return out
 
 
-def orient(normals: torch.Tensor, unit: np.ndarray, weights: np.ndarray,
-           res: int = 32) -> tuple[torch.Tensor, np.ndarray]:
-    """Flip ``normals`` to point out of the coarse solid; also returns ``-grad F`` (unit)."""
-    field = inside_field(unit, weights, res)
+def orient(normals: torch.Tensor, unit: torch.Tensor, weights: np.ndarray,
+           res: int = 32) -> tuple[torch.Tensor, torch.Tensor]:
+    """Flip ``normals`` to point out of the coarse solid; also returns the unit outward
+    direction ``-grad F / |grad F|`` (radial from the weighted centre where ``F`` is flat)."""
+    field = inside_field(unit.detach().numpy(), weights, res)
     down = -field_gradient(field, unit)
-    norm = np.linalg.norm(down, axis=1, keepdims=True)
-    centre = np.average(unit, axis=0, weights=np.maximum(weights, 1e-12))
-    radial = unit - centre  # fallback where the field is flat (deep inside or far outside)
-    down = np.where(norm > 1e-6, down / np.maximum(norm, 1e-12), radial)
-    dots = (normals.detach().numpy() * down).sum(1)
-    sign = torch.as_tensor(np.where(dots < 0, -1.0, 1.0), dtype=normals.dtype)
-    outward = down / np.maximum(np.linalg.norm(down, axis=1, keepdims=True), 1e-12)
+    norm = down.norm(dim=1, keepdim=True)
+    w = torch.as_tensor(weights, dtype=unit.dtype)[:, None]
+    radial = unit - (unit * w).sum(0) / w.sum().clamp_min(1e-12)
+    down = torch.where(norm > 1e-6, down, radial)
+    outward = down / down.norm(dim=1, keepdim=True).clamp_min(1e-12)
+    dots = (normals.detach() * outward.detach()).sum(1)
+    sign = torch.where(dots < 0, -1.0, 1.0).to(normals.dtype)
     return normals * sign[:, None], outward

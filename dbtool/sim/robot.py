@@ -17,7 +17,8 @@ class Robot:
 
     ``points`` (N, 3), ``occupancy`` (N,) in [0, 1], ``stiffness`` (N,) Young's modulus,
     ``actuators`` (N, G) weights of the G actuator groups, ``directions`` (G, 3) unit muscle
-    direction of each group.
+    direction of each group. ``threshold``: occupancy below it is inactive; 0 makes presence
+    equal to occupancy everywhere (smooth physics, exact gradients; used by gradient checks).
     """
 
     points: np.ndarray
@@ -25,24 +26,28 @@ class Robot:
     stiffness: np.ndarray
     actuators: np.ndarray
     directions: np.ndarray
+    threshold: float = OCCUPANCY_THRESHOLD
 
     @property
     def n(self) -> int:
         return int(self.points.shape[0])
 
-    def active(self, threshold: float = OCCUPANCY_THRESHOLD) -> np.ndarray:
-        return self.occupancy >= threshold
+    def active(self, threshold: float | None = None) -> np.ndarray:
+        return self.occupancy >= (self.threshold if threshold is None else threshold)
 
-    def presence(self, threshold: float = OCCUPANCY_THRESHOLD) -> np.ndarray:
+    def presence(self, threshold: float | None = None) -> np.ndarray:
         """Effective occupancy ``phi = occ * [occ >= threshold]``; its gradient is passed
         straight through to ``occupancy`` (SoftZoo)."""
         return np.where(self.active(threshold), self.occupancy, 0.0)
 
-    def compact(self, threshold: float = OCCUPANCY_THRESHOLD) -> Robot:
+    def compact(self, threshold: float | None = None) -> Robot:
         """Drop inactive particles (forward-only runs do not need them)."""
-        keep = self.active(threshold)
+        return self.subset(self.active(threshold))
+
+    def subset(self, keep: np.ndarray) -> Robot:
+        """The particles selected by the boolean mask ``keep``."""
         return Robot(self.points[keep], self.occupancy[keep], self.stiffness[keep],
-                     self.actuators[keep], self.directions)
+                     self.actuators[keep], self.directions, self.threshold)
 
     def particle_directions(self) -> np.ndarray:
         """Per-particle muscle direction: the weighted mean of its groups' directions."""
