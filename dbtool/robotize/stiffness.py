@@ -4,9 +4,10 @@
 ``E0 = 3e4`` (SoftZoo's range is 1e4-1e5).
 
 ``depth``: a soft skin over a stiffer core, as in multi-material soft grippers whose compliant
-surface conforms to contact while the core carries load. With ``d`` the Euclidean distance of a
-particle to the nearest empty lattice site (``scipy.ndimage.distance_transform_edt``, in
-workspace units) and ``D = DEPTH_CELLS`` lattice spacings::
+surface conforms to contact while the core carries load. With ``d`` the depth of a particle
+below the outermost layer (Euclidean distance to the nearest empty lattice site minus one
+spacing, ``scipy.ndimage.distance_transform_edt``, in workspace units) and ``D = DEPTH_CELLS``
+lattice spacings::
 
     E(d) = E_skin + (E_core - E_skin) * smoothstep(min(d / D, 1)),   smoothstep(s) = 3s^2 - 2s^3
 
@@ -34,6 +35,7 @@ def stiffness(mode: str, active: np.ndarray, dims: tuple[int, int, int], spacing
     if mode != "depth":
         raise ValueError(f"unknown stiffness mapping {mode!r}; choose one of {', '.join(MODES)}")
     grid = np.pad(active.reshape(dims), 1)  # the workspace's boundary counts as outside
-    dist = ndimage.distance_transform_edt(grid)[1:-1, 1:-1, 1:-1].ravel() * spacing
+    edt = ndimage.distance_transform_edt(grid)[1:-1, 1:-1, 1:-1].ravel()
+    dist = np.maximum(edt - 1.0, 0.0) * spacing  # the outermost layer has depth 0
     s = np.clip(dist / (DEPTH_CELLS * spacing), 0.0, 1.0)
     return E_SKIN + (E_CORE - E_SKIN) * (3 * s**2 - 2 * s**3)

@@ -6,7 +6,8 @@ import numpy as np
 
 
 def kmeans(points: np.ndarray, k: int, iters: int = 50) -> tuple[np.ndarray, np.ndarray]:
-    """Deterministic Lloyd k-means; seeds are quantiles along the widest axis.
+    """Deterministic Lloyd k-means; seeds are quantiles along the widest axis (spread over
+    the plane in 2-D). A group left empty restarts at the point farthest from its centroid.
 
     Returns (labels, centroids).
     """
@@ -24,10 +25,16 @@ def kmeans(points: np.ndarray, k: int, iters: int = 50) -> tuple[np.ndarray, np.
         cent[:, axis] += spread[axis] * np.cos(ang)
         cent[:, other] += spread[other] * np.sin(ang)
     labels = np.zeros(len(points), int)
-    for _ in range(iters):
+    for it in range(iters):
         d = ((points[:, None, :] - cent[None]) ** 2).sum(-1)
         new = d.argmin(1)
-        if np.array_equal(new, labels) and _ > 0:
+        for j in range(k):  # an empty group restarts at the point worst served by its centroid
+            if not np.any(new == j):
+                far = int(np.argmax(d[np.arange(len(points)), new]))
+                cent[j] = points[far]
+                d[:, j] = ((points - cent[j]) ** 2).sum(-1)
+                new = d.argmin(1)
+        if np.array_equal(new, labels) and it > 0:
             break
         labels = new
         for j in range(k):

@@ -1,0 +1,154 @@
+"""Robotizer Psi: solid accuracy, noise robustness, actuator groups, stiffness, bad input."""
+
+import numpy as np
+import pytest
+
+from dbtool.prior.shapes import make_shape
+from dbtool.robotize.quality import iou, mesh_inside, noisy
+from dbtool.robotize.robotizer import (
+    RobotizeConfig,
+    RobotizeError,
+    lattice_dims,
+    noise_std,
+    robotize,
+)
+from dbtool.robotize.solid import components
+from dbtool.robotize.stiffness import E_CORE, E_SKIN
+from dbtool.sim.robot import DEFAULT_STIFFNESS
+from dbtool.sim.tasks import get_task
+from dbtool.sim.tasks.base import SPACING
+
+ACTUATED = ("crawling", "hurdling", "gripping", "box")
+
+
+def cloud(family: str, n: int = 1024, index: int = 0):
+    return make_shape(family, index, "test", 0, n)
+
+
+@pytest.mark.parametrize("family", ["ball", "hook", "arch", "ring", "quadruped", "cylinder"])
+def test_clean_cloud_matches_the_true_solid(family):
+    """Surface samples of a watertight mesh: IoU with the mesh's solid on the task lattice."""
+    task, shape = get_task("crawling"), cloud(family)
+    rz = robotize(shape.points, task)
+    truth = mesh_inside(shape.mesh, rz.placement.to_prior(task.design_points()))
+    score = iou(rz.robot.active(), truth)
+    print(f"{family}: IoU {score:.3f}")
+    assert score >= 0.85
+
+
+def test_noisy_clouds_keep_their_solid_better_than_direct_sdf():
+    task = get_task("crawling")
+    dims = lattice_dims(task)
+    ours, direct = [], []
+    for family in ("ball", "hook", "ushape", "dumbbell"):
+        x0 = cloud(family).points
+        xt = noisy(x0, 300, seed=3)
+        for method, out in (("dpsr", ours), ("direct_sdf", direct)):
+            ref = robotize(x0, task, method=method).robot.active()
+            rt = robotize(xt, task, noise=noise_std(300), method=method).robot.active()
+            out.append(iou(ref, rt))
+            if method == "dpsr":
+                assert components(rt.reshape(dims)) == 1
+    print(f"t=300 IoU: ours {np.mean(ours):.3f}, direct SDF {np.mean(direct):.3f}")
+    assert np.mean(ours) > np.mean(direct) + 0.1
+
+
+def test_placement_fits_the_workspace_on_the_floor_or_hanging_from_the_base():
+    for name in ("crawling", "gripping", "box"):
+        task = get_task(name)
+        rz = robotize(cloud("hook").points, task)
+        p = rz.robot.points[rz.robot.active()]
+        ws = np.asarray(task.design_workspace())
+        assert np.all(p >= 0) and np.all(p <= ws)
+        if name == "gripping":
+            assert p[:, 1].max() >= ws[1] - 2 * SPACING  # touches the glued base
+        else:
+            assert p[:, 1].min() <= 2 * SPACING  # stands on the ground
+        filled = np.ptp(p, axis=0) + SPACING
+        assert np.max(filled / ws) > 0.9  # scaled up until one side fills the workspace
+
+
+@pytest.mark.parametrize("name", ACTUATED)
+def test_actuator_groups_count_deterministic_and_nonempty(name):
+    task = get_task(name)
+    for family in ("ball", "block", "finger", "quadruped"):
+        x = cloud(family).points
+        a, b = robotize(x, task).robot, robotize(x, task).robot
+        assert a.actuators.shape == (a.n, task.n_groups)
+        assert np.array_equal(a.actuators, b.actuators) and np.array_equal(a.occupancy,
+                                                                           b.occupancy)
+        assert np.allclose(a.actuators.sum(1), 1.0)
+        counts = np.bincount(a.actuators[a.active()].argmax(1), minlength=task.n_groups)
+        assert np.all(counts > 0), f"{name}/{family}: empty actuator group {counts}"
+
+
+MIRROR_PERMUTATION = {"crawling": [3, 2, 1, 0], "hurdling": [1, 0], "gripping": [0, 1],
+                      "box": [0, 1]}
+
+
+@pytest.mark.parametrize("name", ACTUATED)
+def test_mirrored_cloud_gives_mirrored_groups(name):
+    """Mirror x -> -x: the solid is the exact mirror image and each group maps to one group
+    of the mirror robot (crawling's counter-clockwise order reverses)."""
+    task = get_task(name)
+    x = cloud("hook").points.astype(float)
+    r, rm = robotize(x, task).robot, robotize(x * [-1, 1, 1], task).robot
+    dims = lattice_dims(task)
+    a, am = r.active().reshape(dims), r.active().reshape(dims)
+    am = rm.active().reshape(dims)[::-1]
+    assert np.array_equal(a, am)
+    lab = r.actuators.argmax(1).reshape(dims)[a]
+    labm = rm.actuators.argmax(1).reshape(dims)[::-1][a]
+    expected = np.asarray(MIRROR_PERMUTATION[name])[lab]
+    assert np.mean(labm == expected) >= 0.97
+
+
+def test_stiffness_constant_by_default_and_soft_skin_over_stiff_core():
+    task = get_task("crawling")
+    x = cloud("ball").points
+    r = robotize(x, task).robot
+    assert np.all(r.stiffness == DEFAULT_STIFFNESS)
+    d = robotize(x, task, RobotizeConfig(stiffness="depth")).robot
+    e = d.stiffness[d.active()]
+    assert e.min() == pytest.approx(E_SKIN) and e.max() == pytest.approx(E_CORE)
+    centre = np.argmin(np.linalg.norm(d.points - d.points[d.active()].mean(0), axis=1))
+    assert d.stiffness[centre] == pytest.approx(E_CORE)
+    with pytest.raises(ValueError, match="unknown stiffness"):
+        robotize(x, task, RobotizeConfig(stiffness="bone"))
+
+
+def _bad(kind):
+    rng = np.random.default_rng(0)
+    good = cloud("ball").points.astype(float)
+    if kind == "few":
+        return good[:30]
+    if kind == "nan":
+        good[5, 1] = np.nan
+        return good
+    if kind == "identical":
+        return np.tile([0.1, 0.2, 0.3], (500, 1))
+    if kind == "far":
+        return good * 1000.0
+    if kind == "shape":
+        return rng.normal(size=(100, 2))
+    raise AssertionError(kind)
+
+
+@pytest.mark.parametrize("kind,message", [
+    ("few", "at least 50"), ("nan", "NaN"), ("identical", "identical"),
+    ("far", "far outside"), ("shape", "shape"),
+])
+def test_degenerate_clouds_get_a_clear_error(kind, message):
+    with pytest.raises(RobotizeError, match=message):
+        robotize(_bad(kind), get_task("crawling"))
+
+
+def test_a_zero_thickness_sheet_is_never_a_silent_empty_robot():
+    rng = np.random.default_rng(0)
+    sheet = np.c_[rng.uniform(-0.5, 0.5, (800, 2)), np.zeros(800)]
+    try:
+        r = robotize(sheet, get_task("crawling")).robot
+    except RobotizeError as e:
+        assert "solid" in str(e)
+    else:
+        assert r.active().sum() >= 100
