@@ -64,7 +64,7 @@ def simulate(
             d = Design.load(design)
             if d.task != t.name:
                 raise ValueError(f"design {design} was made for task {d.task!r}, not {t.name!r}")
-            robot = d.robot
+            robot = d.robot.compact()
         else:
             if shape not in SHAPES:
                 raise ValueError(f"unknown shape {shape!r}; choose one of {', '.join(SHAPES)}")
@@ -213,6 +213,38 @@ def export(
     typer.echo(f"assembly: watertight={a['watertight']} volume={a['volume_mm3']:.0f} mm^3 "
                f"bbox={a['bbox_mm']} mm")
     typer.echo(f"report:  {out / d.task / 'report.json'}")
+
+
+@app.command()
+def robotize(
+    cloud: Path = typer.Argument(..., help="surface point cloud (.ply, prior frame, y up)"),
+    task: str = typer.Option("crawling", help="balancing, landing, crawling, hurdling, "
+                                              "gripping, box"),
+    out: Path = typer.Option(Path("robot.npz"), "-o", "--out", help="design file (.npz); a "
+                                                                   "PNG is written next to it"),
+    method: str = typer.Option("dpsr", help="dpsr (Psi) or direct_sdf (Figure 8 baseline)"),
+    t: int = typer.Option(None, help="the cloud is a diffusion sample x_t at this step"),
+    noise: float = typer.Option(None, help="std of the noise in the cloud (prior frame)"),
+    res: int = typer.Option(128, min=16, max=256, help="DPSR grid resolution"),
+    stiffness: str = typer.Option("constant", help="constant | depth"),
+) -> None:
+    """Turn a point cloud into a simulatable robot (solid, actuators, stiffness)."""
+    from dbtool.design import Design
+    from dbtool.pointcloud import CloudFileError
+    from dbtool.robotize.files import robotize_file
+    from dbtool.robotize.robotizer import RobotizeConfig
+
+    try:
+        cfg = RobotizeConfig(res=res, stiffness=stiffness)
+        d, path, png = robotize_file(cloud, task, out, method, noise, t, cfg)
+    except (CloudFileError, ValueError, OSError) as exc:
+        _fail(str(exc))
+    assert isinstance(d, Design)
+    r = d.robot
+    typer.echo(f"{d.task}: {int(r.active().sum())} active particles of {r.n}, "
+               f"{r.actuators.shape[1]} actuator groups, method {method}")
+    typer.echo(f"design:  {path}")
+    typer.echo(f"picture: {png}")
 
 
 @app.command()

@@ -113,8 +113,8 @@ def test_stiffness_constant_by_default_and_soft_skin_over_stiff_core():
     assert e.min() == pytest.approx(E_SKIN) and e.max() == pytest.approx(E_CORE)
     centre = np.argmin(np.linalg.norm(d.points - d.points[d.active()].mean(0), axis=1))
     assert d.stiffness[centre] == pytest.approx(E_CORE)
-    with pytest.raises(ValueError, match="unknown stiffness"):
-        robotize(x, task, RobotizeConfig(stiffness="bone"))
+    with pytest.raises(RobotizeError, match="unknown stiffness"):
+        RobotizeConfig(stiffness="bone")
 
 
 def _bad(kind):

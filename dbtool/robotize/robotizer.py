@@ -28,7 +28,7 @@ import torch
 
 from dbtool.robotize import normals as N
 from dbtool.robotize.dpsr import poisson_indicator
-from dbtool.robotize.robust import blend_normals, deflate, distances, noise_level, reweight
+from dbtool.robotize.robust import blend_normals, deflate, reweight
 from dbtool.robotize.solid import (
     DOMAIN,
     SPAN,
@@ -68,12 +68,22 @@ class RobotizeConfig:
     orient_res: int = 32
     robust_iters: int = 2
     robust_scale: float = 2.0
-    noise_gain: float = 0.5
-    clean_floor: float = 0.5
+    noise_gain: float = 0.25
+    robust_floor: float = 1.0
     deflate: bool = True
     softness: float = 0.5
     stiffness: str = "constant"
     min_particles: int = MIN_PARTICLES
+
+    def __post_init__(self) -> None:
+        from dbtool.robotize.stiffness import MODES
+
+        if self.res < 16 or self.sigma <= 0 or self.k < 4 or self.orient_res < 8:
+            raise RobotizeError("robotizer settings out of range: res >= 16, sigma > 0, k >= 4, "
+                                "orient_res >= 8")
+        if self.stiffness not in MODES:
+            raise RobotizeError(f"unknown stiffness mapping {self.stiffness!r}; choose one of "
+                                f"{', '.join(MODES)}")
 
 
 @dataclass
@@ -122,27 +132,26 @@ def lattice_dims(task: Task) -> tuple[int, int, int]:
 
 def indicator(x: torch.Tensor, cfg: RobotizeConfig, noise: float | None = None):
     """Steps 2-3: the DPSR indicator grid of cloud ``x`` (prior frame, torch), with the unit
-    coordinates, weights, oriented normals and the estimated noise level."""
+    coordinates, weights, oriented normals and the noise level used (0 when not given)."""
     inside = (x.detach().abs() <= DOMAIN).all(1)
-    if noise is not None and cfg.deflate:
+    if noise and cfg.deflate:
         x = deflate(x, noise, inside)
     prior_w = inside.to(x.dtype)
     unit = to_unit(x.clamp(-DOMAIN, DOMAIN))
     n_pca, planarity = N.pca_normals(x, cfg.k)
     n_pca, outward = N.orient(n_pca, unit, prior_w.numpy(), cfg.orient_res)
     cell = SPAN / cfg.res  # prior-frame width of a DPSR cell
-    chi = poisson_indicator(unit[None], n_pca[None], cfg.res, cfg.sigma, prior_w[None])[0]
-    d = distances(chi, unit, surface_slope(chi, unit, prior_w))
-    if noise is None:
-        noise = noise_level(d, inside, cfg.clean_floor * cell)
-    noise = torch.as_tensor(noise, dtype=x.dtype)
+    noise_t = torch.as_tensor(0.0 if noise is None else float(noise), dtype=x.dtype)
     if cfg.robust_iters == 0:
-        return chi, unit, prior_w, n_pca, noise
-    n = blend_normals(n_pca, planarity, torch.as_tensor(outward, dtype=x.dtype))
-    sigma = torch.sqrt(cfg.sigma**2 + (cfg.noise_gain * noise / cell) ** 2)
+        chi = poisson_indicator(unit[None], n_pca[None], cfg.res, cfg.sigma, prior_w[None])[0]
+        return chi, unit, prior_w, n_pca, noise_t
+    doubt = min(1.0, float(noise_t) / (2 * cell))
+    n = blend_normals(n_pca, planarity, outward, doubt)
+    sigma = torch.sqrt(cfg.sigma**2 + (cfg.noise_gain * noise_t / cell) ** 2)
     chi, w = reweight(unit, n, prior_w, cfg.res, sigma, lambda c, ww: surface_slope(c, unit, ww),
-                      cfg.robust_iters, cfg.robust_scale, cfg.clean_floor * cell)
-    return chi, unit, w, n, noise
+                      cfg.robust_iters, cfg.robust_scale, max(cfg.robust_floor * cell,
+                                                              float(noise_t)))
+    return chi, unit, w, n, noise_t
 
 
 def robotize(x, task: Task, cfg: RobotizeConfig | None = None, noise: float | None = None,

@@ -8,9 +8,11 @@ does the same with a few closed-form, differentiable reweighting steps (iterativ
 least squares on the Poisson fit), which costs a handful of FFTs instead of an inner optimiser:
 
 1. Normals: each PCA normal is blended with the outward direction of the coarse inside field
-   by its planarity ``p`` (:mod:`dbtool.robotize.normals`): ``n = normalise(p^2 n_pca +
-   (1 - p^2) n_field)``. Clean surface points keep their PCA normal; isotropic noise takes
-   the smooth field's direction, so it no longer adds random divergence.
+   by its planarity ``p`` (:mod:`dbtool.robotize.normals`): ``n = normalise(a n_pca +
+   (1 - a) n_field)`` with ``a = 1 - doubt (1 - p^2)`` and ``doubt = min(1, noise / 2 cells)``.
+   Points of a noisy cloud take the smooth field's direction where their neighbourhood is not
+   planar, so isotropic noise no longer adds random divergence; a clean cloud keeps its PCA
+   normals (sharp edges stay sharp).
 2. Weights, ``iters`` times: reconstruct ``chi`` with the current weights, read the residual
    ``r_i = chi(p_i)`` (0 for a point on the surface; negative for interior noise, positive for
    outliers) and set ``w_i = exp(-(r_i / s)^2)`` with ``s = scale * max(median |r|, floor)``,
@@ -29,10 +31,11 @@ import torch
 from dbtool.robotize.dpsr import poisson_indicator, sample
 
 
-def blend_normals(pca: torch.Tensor, planarity: torch.Tensor, outward: torch.Tensor
-                  ) -> torch.Tensor:
-    """Step 1: trust PCA normals by planarity, fall back to the inside field's direction."""
-    trust = (planarity**2)[:, None]
+def blend_normals(pca: torch.Tensor, planarity: torch.Tensor, outward: torch.Tensor,
+                  doubt: float = 1.0) -> torch.Tensor:
+    """Step 1: trust PCA normals by planarity, fall back to the inside field's direction.
+    ``doubt`` in [0, 1] scales the distrust (0 keeps the PCA normals of a clean cloud)."""
+    trust = (1.0 - doubt * (1.0 - planarity**2))[:, None]
     n = trust * pca + (1.0 - trust) * outward
     return n / n.norm(dim=1, keepdim=True).clamp_min(1e-9)
 
@@ -57,13 +60,6 @@ def deflate(x: torch.Tensor, noise: float, live: torch.Tensor) -> torch.Tensor:
 def distances(chi: torch.Tensor, unit: torch.Tensor, slope: torch.Tensor) -> torch.Tensor:
     """Signed distance (prior frame) of each point to the 0 level: ``chi(p) / |grad chi|``."""
     return sample(chi[None], unit[None])[0] / slope
-
-
-def noise_level(d: torch.Tensor, live: torch.Tensor, floor: float) -> torch.Tensor:
-    """Robust spread of the points about the surface, ``1.4826 MAD`` of the distances, with
-    the reconstruction error of a clean cloud (``floor``) removed in quadrature."""
-    spread = 1.4826 * d[live].abs().median()
-    return torch.sqrt(torch.relu(spread**2 - floor**2) + 1e-12)
 
 
 def reweight(unit: torch.Tensor, normals: torch.Tensor, weights: torch.Tensor, res: int,
