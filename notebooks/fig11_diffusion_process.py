@@ -20,8 +20,8 @@
 # dbtool samples it with strided DDIM and classifier-free guidance (scale 3). The sampler is a
 # generator that hands back control at chosen timesteps, so the intermediate clouds x_t at
 # t = 600, 400, 200 and the final x_0 come out of one run. These intermediate x_t are what the
-# co-design sampler robotizes and simulates at t = 400, 350, ... (SPEC section 5); their
-# robotized views join this figure with the robotizing issue.
+# co-design sampler robotizes and simulates at t = 400, 350, ... (SPEC section 5); the last
+# cell shows their robotized views.
 #
 # Quick mode (`DBTOOL_QUICK=1`, used in CI) draws one sample per prompt with 32 steps instead of
 # two with 64.
@@ -91,3 +91,22 @@ path = [prior.sample(embedding=slerp(a, b, float(u)), n=1, steps=STEPS, seed=0).
         for u in US]
 cloud_grid(path, "fig11_interpolation.png", [f"u = {u:.2f}" for u in US], cols=len(US))
 Image("fig11_interpolation.png")
+
+# %% [markdown]
+# ## What the robotizer makes of x_t
+#
+# The co-design sampler robotizes x_t, not x_0. Psi (`dbtool.robotize`, Figure 8) is told the
+# noise level of each x_t (its std in the cloud's frame, from the cosine schedule) and turns the
+# samples of the first prompt into crawling robots (colours: the four actuator groups).
+
+# %%
+from dbtool.robotize.robotizer import noise_std, robotize
+from dbtool.sim.tasks import get_task
+from dbtool.viz.robot import robot_figure
+
+crawl = get_task("crawling")
+prompt, cs = rows[0]
+panels = [(f"t = {t}", robotize(c, crawl, noise=noise_std(t) if t else None).robot)
+          for t, c in zip(TIMES, cs, strict=True)]
+robot_figure(panels, crawl.design_workspace(), "fig11_robotized.png", title=prompt)
+Image("fig11_robotized.png")
