@@ -27,8 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -171,18 +169,9 @@ def main(argv: list[str] | None = None) -> int:
         verdict = "met" if best["seconds"] < GOAL_EPOCH_S else "missed"
         print(f"\none epoch of designs (60 samples): {best['seconds']:.1f} s at "
               f"{best['steps']} steps (goal < {GOAL_EPOCH_S:.0f} s: {verdict})")
-    import torch
+    from _results import write_result
 
-    result = {"machine": {"platform": platform.platform(), "processor": platform.processor(),
-                          "cpus": os.cpu_count(), "torch": torch.__version__},
-              "goal_epoch_s": GOAL_EPOCH_S, "cases": rows,
-              "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-    out_path = a.out or (DEFAULT_OUT.with_name("prior-quick.json") if a.quick else DEFAULT_OUT)
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out_path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(result, indent=2))
-    tmp.replace(out_path)
-    print(f"wrote {out_path}")
+    write_result({"goal_epoch_s": GOAL_EPOCH_S, "cases": rows}, a.out, DEFAULT_OUT, a.quick)
     return 0
 
 

@@ -21,9 +21,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import statistics
 import sys
 import time
@@ -129,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeats", type=int, default=None, help="timed runs (default 5, quick 1)")
     p.add_argument("--out", type=Path, default=None, help="JSON output path")
     a = p.parse_args(argv)
-    import torch
+    from _results import write_result
 
     from dbtool.prior.shapes import FAMILIES
 
@@ -157,16 +154,8 @@ def main(argv: list[str] | None = None) -> int:
         for t, v in per_t.items():
             print(f"| {m} | {t} | {v['mean_iou']:.3f} | {v['min_iou']:.3f} | "
                   f"{v['single_component']:.0%} |")
-    result = {"machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
-                          "torch": torch.__version__},
-              "speed": rows, "clean_iou": acc, "noise": rob, "quick": a.quick,
-              "wall_s": time.time() - t0, "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-    out_path = a.out or (DEFAULT_OUT.with_name("robotize-quick.json") if a.quick else DEFAULT_OUT)
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out_path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(result, indent=2))
-    tmp.replace(out_path)
-    print(f"wrote {out_path}")
+    write_result({"speed": rows, "clean_iou": acc, "noise": rob, "quick": a.quick,
+                  "wall_s": time.time() - t0}, a.out, DEFAULT_OUT, a.quick)
     return 0
 
 

@@ -12,9 +12,10 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 
 @pytest.fixture(autouse=True, scope="module")
-def taichi_f32(request):
+def taichi_precision(request):
+    """The module's ``PRECISION`` (default f32) for its tests, f32 again afterwards."""
     from dbtool.sim import runtime
 
-    if getattr(request.module, "PRECISION", "f32") == "f32":
-        runtime.init("cpu", "f32")
+    runtime.init("cpu", getattr(request.module, "PRECISION", "f32"))
     yield
+    runtime.init("cpu", "f32")

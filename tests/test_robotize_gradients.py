@@ -13,7 +13,6 @@ import pytest
 from dbtool.prior.shapes import make_shape
 from dbtool.robotize.evaluate import evaluate
 from dbtool.robotize.robotizer import robotize
-from dbtool.sim import runtime
 from dbtool.sim.tasks import get_task
 
 PRECISION = "f64"
@@ -21,12 +20,6 @@ STEPS = 6
 EPS = 1e-5
 TOL = 1e-3
 
-
-@pytest.fixture(autouse=True, scope="module")
-def taichi_f64():
-    runtime.init("cpu", "f64")
-    yield
-    runtime.init("cpu", "f32")
 
 
 def small_cloud() -> np.ndarray:

@@ -9,7 +9,6 @@ derivatives along random directions are compared; the relative errors are printe
 import numpy as np
 import pytest
 
-from dbtool.sim import runtime
 from dbtool.sim.rollout import simulate
 from dbtool.sim.simulator import Particles, Scene, Simulator
 from dbtool.sim.tasks import get_task
@@ -20,12 +19,6 @@ STEPS = 6  # control steps (x 17 substeps), several checkpoints deep
 # the useful step; eps sweeps show the residual is truncation/roundoff, below 1e-4 here.
 TOL = 1e-3
 
-
-@pytest.fixture(autouse=True, scope="module")
-def taichi_f64():
-    runtime.init("cpu", "f64")
-    yield
-    runtime.init("cpu", "f32")
 
 
 def _directional(task, robot, actions, field, direction, eps):
