@@ -4,11 +4,13 @@
    covariance of its ``k`` nearest neighbours. It is a differentiable function of the positions
    (``torch.linalg.eigh``); the neighbour sets are chosen without gradient (piecewise constant).
 2. Consistent outward orientation from a coarse solid (no gradient, piecewise constant): the
-   points are binned on a coarse grid and blurred; cells above a density threshold form a shell,
-   which is closed morphologically and flood-filled from outside (``binary_fill_holes``). The
-   filled solid, blurred, is an inside field ``F``; each normal is flipped to point down ``F``
-   (``n . grad F <= 0``), i.e. away from the inside. Concave parts (rings, cups, U shapes) keep
-   the right sign because the fill follows the shape, not its centroid.
+   points are binned on a coarse grid and blurred; cells above a density threshold form a
+   shell. A cell is inside when it is in the shell or when at least 90% of the 26 grid rays
+   from it hit the shell before leaving the grid (a flood fill would leak through any hole of a
+   sparse shell; ray voting only loses the rays that pass through it). The inside mask, blurred,
+   is a field ``F``; each normal is flipped to point down ``F`` (``n . grad F <= 0``), away
+   from the inside. Concave parts (rings, U shapes) keep the right sign because ``F`` follows
+   the shape, not its centroid. ``grad F`` is interpolated differentiably at the points.
 3. ``planarity = 1 - 3 lambda_min / trace`` (1 on a clean plane, 0 in isotropic noise) says how
    much a PCA normal can be trusted; :mod:`dbtool.robotize.robust` uses it.
 """

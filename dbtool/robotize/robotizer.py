@@ -3,10 +3,10 @@
 ``robotize(x, task)`` runs, in torch:
 
 1. validation of the cloud (:func:`check_cloud`);
-2. oriented normals: local PCA, flipped out of a flood-filled coarse solid
+2. oriented normals: local PCA, flipped out of a ray-voted coarse solid
    (:mod:`dbtool.robotize.normals`);
-3. the robust step: planarity-blended normals and IRLS point weights
-   (:mod:`dbtool.robotize.robust`) around DPSR (:mod:`dbtool.robotize.dpsr`);
+3. the robust step: noise-aware deflation, planarity-blended normals, widened smoothing and
+   IRLS point weights (:mod:`dbtool.robotize.robust`) around DPSR (:mod:`dbtool.robotize.dpsr`);
 4. placement into the task's design workspace and smooth occupancy on its particle lattice,
    largest connected component, minimum-volume guard (:mod:`dbtool.robotize.solid`);
 5. stiffness (:mod:`dbtool.robotize.stiffness`) and actuator groups by k-means of the centred
@@ -58,7 +58,7 @@ class RobotizeError(ValueError):
 @dataclass(frozen=True)
 class RobotizeConfig:
     """Settings of Psi. ``res``/``sigma``: DPSR grid and smoothing (cells); ``k``: PCA
-    neighbours; ``orient_res``: coarse grid of the orientation fill; ``robust_iters``:
+    neighbours; ``orient_res``: coarse grid of the orientation field; ``robust_iters``:
     reweighting passes (0 = plain DPSR); ``softness``: occupancy ramp in lattice spacings;
     ``stiffness``: ``constant`` or ``depth``."""
 

@@ -7,18 +7,25 @@ such inputs in its optimisation setting by fitting point weights and normals to 
 does the same with a few closed-form, differentiable reweighting steps (iteratively reweighted
 least squares on the Poisson fit), which costs a handful of FFTs instead of an inner optimiser:
 
+``noise`` is the std of the noise in the cloud (prior frame), given by the caller
+(``noise_std(t)`` for x_t; 0 for a clean cloud).
+
+0. Deflation (:func:`deflate`): isotropic noise adds ``noise^2`` to every principal variance,
+   so flat shapes come out of x_t as slabs; the spread along each principal axis is scaled
+   back to its moment-matched clean value.
 1. Normals: each PCA normal is blended with the outward direction of the coarse inside field
    by its planarity ``p`` (:mod:`dbtool.robotize.normals`): ``n = normalise(a n_pca +
    (1 - a) n_field)`` with ``a = 1 - doubt (1 - p^2)`` and ``doubt = min(1, noise / 2 cells)``.
    Points of a noisy cloud take the smooth field's direction where their neighbourhood is not
    planar, so isotropic noise no longer adds random divergence; a clean cloud keeps its PCA
-   normals (sharp edges stay sharp).
-2. Weights, ``iters`` times: reconstruct ``chi`` with the current weights, read the residual
-   ``r_i = chi(p_i)`` (0 for a point on the surface; negative for interior noise, positive for
-   outliers) and set ``w_i = exp(-(r_i / s)^2)`` with ``s = scale * max(median |r|, floor)``,
-   a robust scale (the floor stops clean clouds, whose residuals are all tiny, from being
-   thinned). Points far from the current surface get weight ~0 and stop shaping it.
-   Points outside the DPSR domain have weight 0 from the start.
+   normals (sharp edges stay sharp). The DPSR smoothing is widened with the noise (robotizer).
+2. Weights, ``iters`` times: reconstruct ``chi`` with the current weights, take each point's
+   signed distance to the 0 level ``d_i = chi(p_i) / |grad chi|`` (negative for interior
+   noise, positive for outliers) and set ``w_i = exp(-(d_i / s)^2)`` with
+   ``s = scale * max(1.4826 MAD(d), floor)``, a robust scale; the floor (one DPSR cell, or the
+   noise level if larger) stops a clean cloud, whose distances are all tiny, from being
+   thinned. Points far from the current surface get weight ~0 and stop shaping it. Points
+   outside the DPSR domain have weight 0 from the start.
 
 Every step is a torch expression of the positions, so the chain's gradient d chi / d x
 includes the reweighting (the weights are not detached).
