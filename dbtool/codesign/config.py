@@ -1,0 +1,80 @@
+"""Settings of the method: the paper's Tables 4 and 5 per task, and the presets.
+
+``paper`` holds the published values. ``quick`` runs the same algorithm with fewer samples,
+epochs and co-design stops so a design finishes in minutes on a laptop CPU. Values that the
+paper's tables do not give (epochs, embedding learning rate, sampler steps, guidance) are
+dbtool's choices and say so.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+TASKS = ("balancing", "landing", "crawling", "hurdling", "gripping", "box")
+
+
+@dataclass(frozen=True)
+class EmbeddingConfig:
+    """Algorithm 1 / Table 4 (the first six fields), then dbtool's own settings."""
+
+    buffer_size: int
+    min_buffer: int = 60
+    samples_per_epoch: int = 60
+    train_iters: int = 1
+    top_k: int = 6
+    batch_size: int = 6
+    epochs: int = 20  # not in Table 4
+    lr: float = 1e-2  # Adam on c; not in Table 4
+    guidance: float = 3.0  # classifier-free guidance while sampling designs (Point-E's 3)
+    sample_steps: int = 64  # strided sampler steps per design
+
+
+@dataclass(frozen=True)
+class CodesignConfig:
+    """Equations 6-7 / Table 5: Langevin stops at t_max, t_max - dt, ..., t_min, K steps each,
+    noise sigma = sigma_beta * beta_t, physics weight kappa, controller step gamma, renorm."""
+
+    t_max: int = 400
+    t_min: int = 0
+    dt: int = 50
+    K: int = 5
+    sigma_beta: float = 1e-4
+    kappa: float = 1e4
+    gamma: float = 0.001
+    renorm: float = 10.0
+
+
+TABLE4 = {
+    "balancing": EmbeddingConfig(buffer_size=600, top_k=12),
+    "landing": EmbeddingConfig(buffer_size=600, top_k=12),
+    "crawling": EmbeddingConfig(buffer_size=60),
+    "hurdling": EmbeddingConfig(buffer_size=600),
+    "gripping": EmbeddingConfig(buffer_size=60),
+    "box": EmbeddingConfig(buffer_size=60),
+}
+
+TABLE5 = {
+    "balancing": CodesignConfig(K=3, gamma=0.0),
+    "landing": CodesignConfig(t_max=150, dt=25, K=3, gamma=0.0),
+    "crawling": CodesignConfig(gamma=0.01),
+    "hurdling": CodesignConfig(),
+    "gripping": CodesignConfig(),
+    "box": CodesignConfig(),
+}
+
+PRESETS = ("paper", "quick")
+
+
+def preset(name: str, task: str) -> tuple[EmbeddingConfig, CodesignConfig]:
+    """The two configs of ``task`` under preset ``name``."""
+    if task not in TABLE4:
+        raise ValueError(f"unknown task {task!r}; choose one of {', '.join(TASKS)}")
+    if name not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
+    emb, cod = TABLE4[task], TABLE5[task]
+    if name == "quick":
+        emb = replace(emb, buffer_size=min(emb.buffer_size, 24), min_buffer=8,
+                      samples_per_epoch=8, top_k=min(emb.top_k, 4), batch_size=4, epochs=4,
+                      sample_steps=32)
+        cod = replace(cod, t_max=min(cod.t_max, 200), dt=max(cod.dt, 100), K=1)
+    return emb, cod

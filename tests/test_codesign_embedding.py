@@ -1,0 +1,88 @@
+"""Embedding optimisation pieces: presets, the buffer's filter, the c-only training step."""
+
+import numpy as np
+import pytest
+import torch
+
+from dbtool.codesign.buffer import Buffer
+from dbtool.codesign.config import TABLE4, TABLE5, preset
+from dbtool.codesign.embedding import EmbeddingOptimiser, train_step
+from dbtool.prior.pipeline import Prior
+from dbtool.prior.shapes import make_shape
+from dbtool.sim.tasks import get_task
+
+
+def test_paper_preset_is_tables_4_and_5():
+    emb, cod = preset("paper", "balancing")
+    assert (emb.buffer_size, emb.min_buffer, emb.samples_per_epoch, emb.train_iters, emb.top_k,
+            emb.batch_size) == (600, 60, 60, 1, 12, 6)
+    assert [TABLE4[t].buffer_size for t in TABLE4] == [600, 600, 60, 600, 60, 60]
+    assert [TABLE4[t].top_k for t in TABLE4] == [12, 12, 6, 6, 6, 6]
+    assert (TABLE5["landing"].t_max, TABLE5["landing"].dt, TABLE5["landing"].K) == (150, 25, 3)
+    assert [TABLE5[t].gamma for t in TABLE5] == [0.0, 0.0, 0.01, 0.001, 0.001, 0.001]
+    assert all(c.kappa == 1e4 and c.renorm == 10 and c.sigma_beta == 1e-4
+               for c in TABLE5.values())
+    quick, _ = preset("quick", "gripping")
+    assert quick.samples_per_epoch < emb.samples_per_epoch
+    with pytest.raises(ValueError, match="unknown preset"):
+        preset("fast", "gripping")
+    with pytest.raises(ValueError, match="unknown task"):
+        preset("quick", "walking")
+
+
+def test_buffer_keeps_top_k_plus_newest_and_is_a_fifo():
+    buf = Buffer(capacity=5)
+    clouds = np.zeros((3, 4, 3))
+    buf.add(clouds, np.array([0.3, 0.1, np.nan]), epoch=0)  # the failed design never enters
+    buf.add(clouds, np.array([0.2, 0.5, 0.0]), epoch=1)
+    assert len(buf) == 5
+    ts = buf.training_set(top_k=1)
+    assert [e.metric for e in ts] == [0.5, 0.2, 0.0]  # best, then the rest of the newest epoch
+    buf.add(clouds[:2], np.array([0.05, 0.04]), epoch=2)
+    assert len(buf) == 5 and [e.metric for e in buf.entries] == [0.2, 0.5, 0.0, 0.05, 0.04]
+    assert [e.metric for e in buf.training_set(top_k=2)] == [0.5, 0.2, 0.05, 0.04]
+    back = Buffer.from_state(5, buf.state())
+    assert [e.metric for e in back.entries] == [e.metric for e in buf.entries]
+
+
+def test_training_moves_only_the_embedding_and_fits_the_buffer():
+    prior = Prior.load(with_upsampler=False)
+    for p in prior.base.parameters():
+        p.requires_grad_(False)
+    before = [p.detach().clone() for p in prior.base.parameters()]
+    buf = Buffer(16)
+    stars = np.stack([make_shape("star", i, "train", 0, 1024).points for i in range(4)])
+    buf.add(stars, np.ones(4), 0)
+    entries = buf.training_set(4)
+    c = prior.embed("a ball").clone().requires_grad_(True)
+    c0 = c.detach().clone()
+    opt = torch.optim.Adam([c], lr=2e-2)
+    gen = torch.Generator().manual_seed(0)
+
+    def held_out_loss():
+        g = torch.Generator().manual_seed(123)
+        x0 = torch.as_tensor(stars) * 2.0
+        with torch.no_grad():
+            return float(prior.diffusion.loss(prior.eps, x0, c.detach().expand(4, -1),
+                                              generator=g, p_uncond=0.0))
+
+    start = held_out_loss()
+    for _ in range(30):
+        train_step(prior, c, opt, entries, 4, gen)
+    assert held_out_loss() < start  # c now explains the (star) buffer better than "a ball"
+    assert not torch.equal(c.detach(), c0)
+    assert all(torch.equal(a, p) for a, p in zip(before, prior.base.parameters(), strict=True))
+
+
+def test_one_epoch_samples_scores_and_trains():
+    emb, _ = preset("quick", "crawling")
+    from dataclasses import replace
+
+    emb = replace(emb, samples_per_epoch=2, min_buffer=2, batch_size=2, sample_steps=8)
+    prior = Prior.load(with_upsampler=False)
+    opt = EmbeddingOptimiser(prior, get_task("crawling"), emb, prior.embed("a block"), seed=0,
+                             n_steps=4)
+    row = opt.step()
+    assert row["epoch"] == 0 and len(row["metrics"]) == 2 and row["buffer"] >= 1
+    assert row["loss"] is not None and np.isfinite(row["loss"])
+    assert opt.epoch == 1
