@@ -44,7 +44,7 @@ def direct_occupancy(x: torch.Tensor, task: Task, cfg):
     n, _ = N.pca_normals(xl, cfg.k)
     n, _ = N.orient(n, to_unit(xl), np.ones(len(xl)), cfg.orient_res)
     lo, hi = xl.detach().min(0).values.numpy(), xl.detach().max(0).values.numpy()
-    place = Placement.fit(lo, hi, task.design_workspace(), hang=task.name == "gripping")
+    place = Placement.for_task(lo, hi, task)
     pts = task.design_points()
     ws = np.asarray(task.design_workspace())
     dims = np.round(ws / SPACING).astype(int)

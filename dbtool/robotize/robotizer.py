@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from dbtool.robotize import normals as N
+from dbtool.robotize.direct_sdf import direct_occupancy
 from dbtool.robotize.dpsr import poisson_indicator
 from dbtool.robotize.robust import blend_normals, deflate, reweight
 from dbtool.robotize.solid import (
@@ -159,7 +160,7 @@ def robotize(x, task: Task, cfg: RobotizeConfig | None = None, noise: float | No
     """Psi: the robot of cloud ``x`` (prior frame) on ``task``'s design lattice.
 
     ``noise``: the std of the Gaussian noise in ``x`` (prior frame) when it is known, e.g.
-    ``noise_std(t)`` for a diffusion sample x_t; ``None`` estimates it. ``method``: ``dpsr``
+    ``noise_std(t)`` for a diffusion sample x_t; ``None`` means a clean cloud. ``method``: ``dpsr``
     (this module) or ``direct_sdf`` (the Figure 8 baseline, :mod:`dbtool.robotize.direct_sdf`).
     """
     cfg = cfg or RobotizeConfig()
@@ -168,8 +169,6 @@ def robotize(x, task: Task, cfg: RobotizeConfig | None = None, noise: float | No
                             f"{', '.join(METHODS)}")
     xt = torch.tensor(check_cloud(x), dtype=dtype, requires_grad=True)
     if method == "direct_sdf":
-        from dbtool.robotize.direct_sdf import direct_occupancy
-
         occ, place, w, n = direct_occupancy(xt, task, cfg)
         active = occ.detach().numpy() >= OCCUPANCY_THRESHOLD
         return _assemble(task, cfg, xt, occ, active, place, np.zeros(0), w, n, 0.0)
@@ -178,7 +177,7 @@ def robotize(x, task: Task, cfg: RobotizeConfig | None = None, noise: float | No
     lo, hi, cells = grid_solid_box(chi_np)
     if cells == 0:
         raise RobotizeError("the reconstructed solid is empty (no inside found)")
-    place = Placement.fit(lo, hi, task.design_workspace(), hang=task.name == "gripping")
+    place = Placement.for_task(lo, hi, task)
     pts = task.design_points()
     slope = surface_slope(chi, unit, w)
     q_prior = torch.as_tensor(place.to_prior(pts), dtype=dtype)

@@ -79,12 +79,17 @@ class Placement:
         scale = float(np.min(ws / ext))
         centre = (lo + hi) / 2
         anchor = ws / 2
-        centre = centre.copy()
         if hang:
             centre[1], anchor[1] = hi[1], ws[1]
         else:
             centre[1], anchor[1] = lo[1], 0.0
         return cls(centre, anchor, scale)
+
+    @classmethod
+    def for_task(cls, lo: np.ndarray, hi: np.ndarray, task) -> Placement:
+        """:meth:`fit` into ``task``'s design workspace; the gripper finger hangs from its
+        glued base, every other body stands on the ground."""
+        return cls.fit(lo, hi, task.design_workspace(), hang=task.name == "gripping")
 
 
 def grid_solid_box(chi: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
