@@ -117,25 +117,78 @@ DEFAULT_BODY = {"gripping": "finger"}
 @app.command()
 def design(
     task: str = typer.Argument(..., help="balancing, landing, crawling, hurdling, gripping, box"),
-    iterations: int = typer.Option(4, min=0, help="gradient steps on the design"),
-    shape: str = typer.Option(None, help="starting reference body (default: box; finger for "
-                                         "gripping)"),
+    preset: str = typer.Option("quick", help="quick (minutes on a laptop CPU) | paper "
+                                             "(Tables 4-5)"),
+    prompt: str = typer.Option(None, help="text feedback composed with the optimised "
+                                          "embedding, e.g. 'a star' (SPEC 6)"),
+    prompt_guidance: float = typer.Option(3.0, help="guidance weight of --prompt"),
+    start: str = typer.Option(None, help="prompt the embedding starts from (default: null)"),
+    seed: int = typer.Option(0, help="seed of the whole run"),
+    epochs: int = typer.Option(None, min=0, help="embedding epochs (default: the preset's)"),
+    samples: int = typer.Option(None, min=1, help="co-designed samples (default: preset's)"),
+    kappa: float = typer.Option(None, min=0, help="physics weight (default: Table 5's)"),
     steps: int = typer.Option(100, min=1, help="control steps per episode"),
-    out: Path = typer.Option(None, help="run directory (default runs/design-TASK-TIME)"),
-    seed: int = typer.Option(0, help="seed for numpy, torch and Python"),
+    run_dir: Path = typer.Option(None, "--run-dir",
+                                 help="run directory (default runs/design-TASK-TIME)"),
+    resume: Path = typer.Option(None, help="continue the run in this directory"),
+    method: str = typer.Option("diffusebot", help="diffusebot | particle (the baseline)"),
+    iterations: int = typer.Option(4, min=0, help="particle baseline: gradient steps"),
     arch: str = typer.Option("cpu", help="cpu | cuda | auto"),
 ) -> None:
-    """Design a robot for TASK and save it (design.npz) in a run directory.
+    """Breed a robot for TASK (DiffuseBot: embedding optimisation, then diffusion as
+    co-design) and save design.npz, metrics and figures in a resumable run directory."""
+    from dbtool.sim import runtime
 
-    Until the diffusion prior lands this runs the particle-based baseline (SPEC section 7):
-    a reference body whose per-particle geometry, softness and actuator logits, and the
-    open-loop controller, follow the simulator's gradients.
-    """
+    if method == "particle":
+        return _design_particle(task, iterations, steps, run_dir, seed, arch)
+    if method != "diffusebot":
+        _fail(f"unknown method {method!r}; choose diffusebot or particle")
+    from dbtool.codesign.run import DesignRun, RunError, Settings
+    from dbtool.runs import seed_everything
+    from dbtool.sim.simulator import SimulationError
+    from dbtool.sim.tasks import get_task
+
+    try:
+        if resume is not None:
+            runtime.init(arch=arch)
+            run = DesignRun.resume(resume)
+            typer.echo(f"resuming {resume} at epoch {run.state.epoch}, "
+                       f"{len(run.state.samples)} co-designed samples done")
+        else:
+            t = get_task(task)
+            settings = Settings(t.name, preset, seed, epochs, start, prompt, prompt_guidance,
+                                samples, kappa, None, steps)
+            settings.configs()
+            runtime.init(arch=arch)
+            seed_everything(seed)
+            path = run_dir or Path("runs") / f"design-{t.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+            run = DesignRun(path, settings)
+            run.start(runtime.device())
+    except (ValueError, RunError) as exc:
+        _fail(str(exc))
+    typer.echo(f"run directory: {run.path}")
+    try:
+        result = run.run(progress=True)
+    except KeyboardInterrupt:
+        typer.echo(f"interrupted; continue with: dbtool design {run.settings.task} "
+                   f"--resume {run.path}", err=True)
+        raise typer.Exit(code=130) from None
+    except (SimulationError, RunError, FloatingPointError) as exc:
+        _fail(str(exc))
+    metric = result.metrics[run.task.name]
+    typer.echo(f"{run.task.name}: final metric = {metric:.6f}")
+    typer.echo(f"design:  {run.path / 'design.npz'}")
+
+
+def _design_particle(task: str, iterations: int, steps: int, out: Path | None, seed: int,
+                     arch: str) -> None:
+    """The particle-based baseline (SPEC section 7): a reference body whose per-particle
+    geometry, softness and actuator logits, and the open-loop controller, follow the
+    simulator's gradients."""
     from dbtool.baselines.particle import optimise
     from dbtool.design import Design
     from dbtool.runs import RunDir, seed_everything
     from dbtool.sim import runtime
-    from dbtool.sim.bodies import SHAPES
     from dbtool.sim.rollout import simulate as run_episode
     from dbtool.sim.simulator import SimulationError
     from dbtool.sim.tasks import get_task
@@ -144,11 +197,9 @@ def design(
     try:
         t = get_task(task)
         runtime.init(arch=arch)
-        shape = shape or DEFAULT_BODY.get(t.name, "box")
-        if shape not in SHAPES:
-            raise ValueError(f"unknown shape {shape!r}; choose one of {', '.join(SHAPES)}")
     except ValueError as exc:
         _fail(str(exc))
+    shape = DEFAULT_BODY.get(t.name, "box")
     seed_everything(seed)
     out = out or Path("runs") / f"design-{t.name}-{time.strftime('%Y%m%d-%H%M%S')}"
     config = {"command": "design", "task": t.name, "method": "particle-baseline",

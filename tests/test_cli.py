@@ -64,8 +64,10 @@ def test_bad_input_is_one_line_and_nonzero(tmp_path):
 
 
 def test_design_then_export(tmp_path):
-    out = _run("design", "gripping", "--iterations", "1", "--steps", "4", cwd=tmp_path)
+    out = _run("design", "gripping", "--epochs", "1", "--samples", "1", "--steps", "4",
+               cwd=tmp_path)
     assert out.returncode == 0, out.stderr
+    assert "final metric" in out.stdout
     found = list((tmp_path / "runs").glob("design-gripping-*/design.npz"))
     assert len(found) == 1
     d = Design.load(found[0])
@@ -74,6 +76,13 @@ def test_design_then_export(tmp_path):
     assert out.returncode == 0, out.stderr
     assert (tmp_path / "exports" / "gripping" / "gripping_assembly.stl").stat().st_size > 0
     assert "watertight=True" in out.stdout
+
+
+def test_particle_baseline_still_designs(tmp_path):
+    out = _run("design", "crawling", "--method", "particle", "--iterations", "1", "--steps",
+               "4", "--run-dir", str(tmp_path / "r"))
+    assert out.returncode == 0, out.stderr
+    assert Design.load(tmp_path / "r" / "design.npz").meta["method"] == "particle-baseline"
 
 
 def test_export_without_a_design_fails_cleanly(tmp_path):

@@ -1,10 +1,11 @@
 """The design buffer of embedding optimisation (Algorithm 1, Table 4).
 
 Every epoch's sampled designs (their x_0 clouds) enter with their performance; the buffer is a
-FIFO of ``capacity`` entries. The training set is the ``top_k`` entries by performance plus
-the newest epoch's samples: the top-k filter is the importance weighting of appendix B (it
-concentrates the data on high performance), the newest samples keep c anchored near what it
-currently generates.
+FIFO of ``capacity`` entries, so it holds only the most recent designs (Table 4: for crawling,
+gripping and moving a box the buffer is exactly one epoch of samples). The training set is the
+``top_k`` entries by performance: the top-k filter is the importance weighting of appendix B
+(it concentrates the data on high performance, like the elite set of the cross-entropy
+method).
 """
 
 from __future__ import annotations
@@ -39,14 +40,16 @@ class Buffer:
         self.entries = self.entries[-self.capacity:]
 
     def training_set(self, top_k: int) -> list[Entry]:
-        """The top-k entries by metric plus every entry of the newest epoch (no duplicates),
-        best first."""
+        """The ``top_k`` entries by metric, best first: the elite of the most recent designs
+        (the buffer is a FIFO, so old designs leave it)."""
+        return self.best(top_k)
+
+    def newest(self) -> list[Entry]:
+        """The newest epoch's entries (unfiltered)."""
         if not self.entries:
             return []
-        order = sorted(range(len(self.entries)), key=lambda i: -self.entries[i].metric)
-        newest = max(e.epoch for e in self.entries)
-        keep = set(order[:top_k]) | {i for i, e in enumerate(self.entries) if e.epoch == newest}
-        return [self.entries[i] for i in order if i in keep]
+        last = max(e.epoch for e in self.entries)
+        return [e for e in self.entries if e.epoch == last]
 
     def best(self, n: int = 1) -> list[Entry]:
         return sorted(self.entries, key=lambda e: -e.metric)[:n]

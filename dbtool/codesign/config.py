@@ -24,9 +24,12 @@ class EmbeddingConfig:
     top_k: int = 6
     batch_size: int = 6
     epochs: int = 20  # not in Table 4
-    lr: float = 1e-2  # Adam on c; not in Table 4
+    lr: float = 0.1  # Adam on the embedding's parameters; not in Table 4
     guidance: float = 3.0  # classifier-free guidance while sampling designs (Point-E's 3)
     sample_steps: int = 64  # strided sampler steps per design
+    loss_guidance: float = 1.0  # guidance of the predictor trained (1: conditional, as paper)
+    space: str = "captions"  # where c lives: captions (convex hull) | free
+    baseline: bool = False  # subtract the loss on the newest unfiltered samples
 
 
 @dataclass(frozen=True)
@@ -42,6 +45,8 @@ class CodesignConfig:
     kappa: float = 1e4
     gamma: float = 0.001
     renorm: float = 10.0
+    samples: int = 4  # co-designed samples; the best becomes the design (not in Table 5)
+    step_scale: float = 1.0  # Langevin step eta_t = step_scale * beta_t; not in Table 5
 
 
 TABLE4 = {
@@ -73,8 +78,8 @@ def preset(name: str, task: str) -> tuple[EmbeddingConfig, CodesignConfig]:
         raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
     emb, cod = TABLE4[task], TABLE5[task]
     if name == "quick":
-        emb = replace(emb, buffer_size=min(emb.buffer_size, 24), min_buffer=8,
-                      samples_per_epoch=8, top_k=min(emb.top_k, 4), batch_size=4, epochs=4,
-                      sample_steps=32)
-        cod = replace(cod, t_max=min(cod.t_max, 200), dt=max(cod.dt, 100), K=1)
+        ratio = emb.buffer_size // emb.samples_per_epoch  # epochs the buffer remembers
+        emb = replace(emb, samples_per_epoch=12, min_buffer=12, buffer_size=12 * ratio,
+                      top_k=3, batch_size=4, train_iters=4, epochs=4, sample_steps=32)
+        cod = replace(cod, dt=100, K=1, samples=2)
     return emb, cod

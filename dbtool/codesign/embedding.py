@@ -10,7 +10,9 @@ dropped during these steps (``p_uncond = 0``): c is what is being learned.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 import torch
@@ -23,13 +25,16 @@ from dbtool.sim.simulator import SimulationError
 from dbtool.sim.tasks import N_STEPS, Task
 
 
-def score(clouds: np.ndarray, task: Task, n_steps: int = N_STEPS, progress=None) -> np.ndarray:
-    """Forward-only performance of each cloud; NaN where it cannot be robotized or simulated
-    (such designs never enter the buffer)."""
+def score(clouds: np.ndarray, task: Task, n_steps: int = N_STEPS, progress=None,
+          controllers: list | None = None) -> np.ndarray:
+    """Forward-only performance of each cloud (with the task's prescribed controller unless
+    ``controllers`` are given); NaN where it cannot be robotized or simulated (such designs
+    never enter the buffer)."""
     out = np.full(len(clouds), np.nan)
     for i, x in enumerate(clouds):
+        u = None if controllers is None else controllers[i]
         try:
-            out[i], _ = evaluate(x, task, need_grad=False, n_steps=n_steps)
+            out[i], _ = evaluate(x, task, u, need_grad=False, n_steps=n_steps)
         except (RobotizeError, SimulationError, FloatingPointError):
             pass
         if progress is not None:
@@ -37,18 +42,97 @@ def score(clouds: np.ndarray, task: Task, n_steps: int = N_STEPS, progress=None)
     return out
 
 
-def train_step(prior, c: torch.Tensor, opt: torch.optim.Optimizer, entries: list[Entry],
-               batch_size: int, gen: torch.Generator) -> float:
+def guided_loss(prior, x0: torch.Tensor, c: torch.Tensor, guidance: float, t: torch.Tensor,
+                eps: torch.Tensor) -> torch.Tensor:
+    """Per-sample epsilon MSE of the guided predictor ``eps_u + s (eps_c - eps_u)`` (the model
+    the designs are sampled from), differentiable w.r.t. ``c`` only."""
+    b = x0.shape[0]
+    xt = prior.diffusion.q_sample(x0, t, eps)
+    pred = prior.eps(xt, t, c.expand(b, -1))
+    if guidance != 1.0:
+        with torch.no_grad():
+            unc = prior.eps(xt, t, torch.zeros(b, c.shape[-1]))
+        pred = unc + guidance * (pred - unc)
+    return ((pred - eps) ** 2).mean(dim=(1, 2))
+
+
+def train_step(prior, c: torch.Tensor | Callable[[], torch.Tensor], opt: torch.optim.Optimizer,
+               entries: list[Entry], batch_size: int, gen: torch.Generator, guidance: float = 1.0,
+               baseline: list[Entry] | None = None) -> float:
     """One Adam step of the diffusion loss w.r.t. ``c`` (shape ``(1, D)``) on a batch drawn
-    from ``entries``."""
+    from ``entries``.
+
+    With ``baseline`` the objective is ``L(entries) - L(baseline)`` on the same timesteps and
+    noise: the loss on the unfiltered recent samples is a control variate that cancels the
+    drift c has on its own samples, leaving the performance filter's signal (docs/codesign.md).
+    """
+    if callable(c):
+        c = c()
     idx = torch.randint(len(entries), (batch_size,), generator=gen).tolist()
     x0 = torch.as_tensor(np.stack([entries[i].cloud for i in idx]), dtype=torch.float32) * SCALE
-    loss = prior.diffusion.loss(prior.eps, x0, c.expand(batch_size, -1), generator=gen,
-                                p_uncond=0.0)
+    t = torch.randint(0, prior.diffusion.T, (batch_size,), generator=gen)
+    eps = torch.randn(x0.shape, generator=gen)
+    loss = guided_loss(prior, x0, c, guidance, t, eps).mean()
+    objective = loss
+    if baseline:
+        jdx = torch.randint(len(baseline), (batch_size,), generator=gen).tolist()
+        xb = torch.as_tensor(np.stack([baseline[j].cloud for j in jdx]),
+                             dtype=torch.float32) * SCALE
+        objective = loss - guided_loss(prior, xb, c, guidance, t, eps).mean()
     opt.zero_grad()
-    loss.backward()
+    objective.backward()
     opt.step()
     return float(loss.detach())
+
+
+@lru_cache(maxsize=1)
+def caption_atoms() -> tuple[tuple[str, ...], torch.Tensor]:
+    """One caption per corpus family ("a ball", "a star", ...) and their embeddings: the
+    conditions the shipped prior was trained on."""
+    from dbtool.prior.shapes import FAMILIES, make_shape
+    from dbtool.prior.text import encode
+
+    names = tuple(make_shape(f, 0, "train", 0, 64).caption for f in FAMILIES)
+    return names, encode(list(names))
+
+
+class Embedding(torch.nn.Module):
+    """The optimised condition c.
+
+    ``free``: c itself (384 numbers). ``captions``: ``c = sum_k softmax(w)_k e_k`` over the
+    family captions' embeddings, the start condition and the null (zero) embedding, so c stays
+    in the convex hull of conditions the prior was trained on (docs/codesign.md: a free c
+    leaves that region within a few Adam steps and the samples degrade). Either way it starts
+    at the given condition (weight ``start_weight`` on it for ``captions``)."""
+
+    def __init__(self, start: torch.Tensor, space: str = "captions",
+                 start_weight: float = 0.9) -> None:
+        super().__init__()
+        if space not in ("free", "captions"):
+            raise ValueError(f"unknown embedding space {space!r}; choose free or captions")
+        self.space = space
+        start = start.detach().reshape(1, -1).float()
+        if space == "free":
+            self.c = torch.nn.Parameter(start.clone())
+            return
+        _, caps = caption_atoms()
+        atoms = torch.cat([start, torch.zeros_like(start), caps])
+        if float(start.norm()) == 0:
+            atoms = atoms[1:]  # the start is the null embedding
+        self.register_buffer("atoms", atoms)
+        n = len(atoms)
+        logit = float(np.log(start_weight * (n - 1) / (1 - start_weight)))
+        w = torch.zeros(n)
+        w[0] = logit
+        self.w = torch.nn.Parameter(w)
+
+    def forward(self) -> torch.Tensor:
+        if self.space == "free":
+            return self.c
+        return torch.softmax(self.w, 0)[None] @ self.atoms
+
+    def weights(self) -> torch.Tensor | None:
+        return torch.softmax(self.w.detach(), 0) if self.space == "captions" else None
 
 
 @dataclass
@@ -67,15 +151,20 @@ class EmbeddingOptimiser:
     def __post_init__(self) -> None:
         for p in self.prior.base.parameters():
             p.requires_grad_(False)
-        self.c = self.c.detach().reshape(1, -1).float().clone().requires_grad_(True)
-        self.opt = torch.optim.Adam([self.c], lr=self.cfg.lr)
+        self.embedding = Embedding(self.c, self.cfg.space)
+        self.opt = torch.optim.Adam(self.embedding.parameters(), lr=self.cfg.lr)
         self.buffer = Buffer(self.cfg.buffer_size)
         self.gen = torch.Generator().manual_seed(self.seed)
+
+    def current(self) -> torch.Tensor:
+        """The embedding now, ``(1, D)``, detached."""
+        with torch.no_grad():
+            return self.embedding().detach().clone()
 
     def sample(self, n: int, seed: int) -> np.ndarray:
         """``n`` designs (x_0 clouds, prior frame) from the current embedding."""
         with torch.no_grad():
-            return self.prior.sample(embedding=self.c.detach(), n=n, guidance=self.cfg.guidance,
+            return self.prior.sample(embedding=self.current(), n=n, guidance=self.cfg.guidance,
                                      steps=self.cfg.sample_steps, seed=seed).clouds
 
     def step(self, progress=None) -> dict:
@@ -87,8 +176,10 @@ class EmbeddingOptimiser:
         losses = []
         if len(self.buffer) >= cfg.min_buffer:
             entries = self.buffer.training_set(cfg.top_k)
-            losses = [train_step(self.prior, self.c, self.opt, entries, cfg.batch_size,
-                                 self.gen) for _ in range(cfg.train_iters)]
+            base = self.buffer.newest() if cfg.baseline else None
+            losses = [train_step(self.prior, self.embedding, self.opt, entries, cfg.batch_size,
+                                 self.gen, cfg.loss_guidance, base)
+                      for _ in range(cfg.train_iters)]
         ok = metrics[np.isfinite(metrics)]
         row = {"epoch": self.epoch, "mean": float(ok.mean()) if len(ok) else float("nan"),
                "max": float(ok.max()) if len(ok) else float("nan"),

@@ -1,0 +1,129 @@
+"""Diffusion as co-design (SPEC section 5; equations 6-7, appendix eqs. 10-13; Table 5).
+
+Sampling runs with the optimised embedding. At every co-design stop
+``t = t_max, t_max - dt, ..., t_min`` the sampler hands ``x_t`` (model space) to ``K`` steps of
+unadjusted Langevin dynamics (eq. 12) on ``log p(x_t | c) + kappa R(Psi(x_t), phi)``::
+
+    s      = -eps_guided(x_t, t, c) / sqrt(1 - abar_t)            # eq. 13, the model's score
+    g      = d R(Psi(x_t), phi) / d x_t                           # robotizer + simulator
+    p      = clip_rho(kappa * g)                                  # renormalised physics drift
+    x_t   <- x_t + eta_t * (s + p) + sigma_t * z,   z ~ N(0, I)
+    phi   <- phi + gamma * d R / d phi                            # active tasks only
+
+with ``eta_t = step_scale * beta_t`` (the forward variance at t: the step the reverse process
+itself takes on the score), ``sigma_t = sigma_beta * beta_t`` (Table 5's noise scale) and
+``clip_rho(v) = v * min(1, rho / rms(v))`` where ``rms`` is the root mean square of the
+per-point vectors and ``rho`` is Table 5's renorm scale. Performance R is ascended (``+p``)
+and ``-log p`` descended (``+s``). The controller phi is the per-step actuation sequence,
+initialised from the task's prescribed controller and kept in [-1, 1].
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from dbtool.codesign.config import CodesignConfig
+from dbtool.prior.diffusion import SCALE, guided_eps
+from dbtool.robotize import RobotizeError, evaluate_full, noise_std
+from dbtool.sim.simulator import SimulationError
+from dbtool.sim.tasks import N_STEPS, Task
+
+
+def rms(v: torch.Tensor) -> float:
+    """Root mean square of the per-point 3-vectors of ``v`` (``(..., N, 3)``)."""
+    return float(v.reshape(-1, 3).norm(dim=1).pow(2).mean().sqrt())
+
+
+def clip_rms(v: torch.Tensor, rho: float) -> torch.Tensor:
+    """``v`` scaled down so that its per-point RMS is at most ``rho`` (the renorm scale)."""
+    r = rms(v)
+    return v * (rho / r) if r > rho else v
+
+
+def stops(cfg: CodesignConfig) -> list[int]:
+    """The co-design timesteps ``t_max, t_max - dt, ..., >= t_min``."""
+    return list(range(cfg.t_max, cfg.t_min - 1, -cfg.dt))
+
+
+@dataclass
+class Physics:
+    """Performance of ``x_t`` and its gradients (model space)."""
+
+    metric: float
+    grad_x: torch.Tensor  # (N, 3), d R / d x_t in model space
+    grad_phi: np.ndarray | None
+
+
+def physics(x_model: torch.Tensor, t: int, task: Task, phi: np.ndarray | None,
+            n_steps: int = N_STEPS) -> Physics:
+    """Robotize ``x_t`` (noise-aware, issue 4) and differentiate the episode."""
+    x = x_model.detach().reshape(-1, 3).double().numpy() / SCALE
+    ev = evaluate_full(x, task, phi, need_grad=True, noise=noise_std(t) if t > 0 else None,
+                       n_steps=n_steps)
+    g = torch.as_tensor(ev.grad_x, dtype=torch.float32).reshape(-1, 3) / SCALE
+    return Physics(ev.metric, g, ev.grad_actions)
+
+
+@dataclass
+class CodesignResult:
+    cloud: np.ndarray  # (N, 3), prior frame
+    controller: np.ndarray | None
+    history: list[dict] = field(default_factory=list)
+
+
+def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float]],
+                    cfg: CodesignConfig, seed: int = 0, steps: int = 64,
+                    n_steps: int = N_STEPS, controller: np.ndarray | None = None,
+                    on_step: Callable[[dict], None] | None = None) -> CodesignResult:
+    """One design sampled with the co-design Langevin steps (module docstring).
+
+    ``conds`` are the guidance terms (the optimised embedding and, for text feedback, the
+    prompt); ``kappa = 0`` gives the plain sampler plus score-only Langevin steps (the
+    ablation). Failures of the robotizer or the simulator at a noisy x_t skip the physics
+    term of that step (recorded in the history)."""
+    diff = prior.diffusion
+    active = task.n_groups > 0 and cfg.gamma > 0
+    phi = None
+    if task.n_groups > 0:
+        phi = np.array(task.controller(n_steps) if controller is None else controller, float)
+    gen = torch.Generator().manual_seed(seed + 7_919)
+    at = stops(cfg)
+    history: list[dict] = []
+    last = None
+    for step in prior.sampler(conds, 1, steps, seed, include=at, eta=1.0):
+        last = step
+        if step.t not in at or cfg.K < 1:
+            continue
+        t = step.t
+        x = step.x
+        beta = float(diff.betas[t])
+        eta, sigma = cfg.step_scale * beta, cfg.sigma_beta * beta
+        for k in range(cfg.K):
+            eps = guided_eps(prior.eps, x, t, conds)
+            score = -eps / float((1 - diff.abar[t]).sqrt())
+            row = {"t": t, "k": k, "score_rms": rms(score)}
+            drift = score
+            if cfg.kappa > 0:
+                try:
+                    ph = physics(x, t, task, phi, n_steps)
+                except (RobotizeError, SimulationError, FloatingPointError) as exc:
+                    row["error"] = str(exc)
+                else:
+                    raw = cfg.kappa * ph.grad_x.reshape(x.shape)
+                    p = clip_rms(raw, cfg.renorm)
+                    drift = score + p
+                    row.update(metric=ph.metric, physics_rms=rms(raw), applied_rms=rms(p))
+                    if active and ph.grad_phi is not None:
+                        phi = np.clip(phi + cfg.gamma * ph.grad_phi, -1.0, 1.0)
+                        row["phi_grad"] = float(np.abs(ph.grad_phi).max())
+            x = x + eta * drift + sigma * torch.randn(x.shape, generator=gen)
+            history.append(row)
+            if on_step is not None:
+                on_step(row)
+        step.x = x
+    cloud = last.x[0].numpy() / SCALE
+    return CodesignResult(cloud, phi, history)

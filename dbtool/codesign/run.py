@@ -1,0 +1,300 @@
+"""One design run (``dbtool design TASK``): embedding optimisation, then diffusion as co-design,
+then the final robot, all in a resumable run directory.
+
+Files of a run (each written atomically: temp file, then rename)::
+
+    config.json      resolved settings and both configs (Tables 4-5 after the preset)
+    manifest.json    versions, seed, git sha, device
+    metrics.jsonl    one row per epoch and per co-design Langevin step
+    checkpoint.pt    state after the last completed epoch / co-designed sample
+    best.npz         the buffer's best designs (clouds, metrics)
+    design.npz       the final robot (upsampled cloud, fields, controller, metric)
+    performance.png  performance per epoch and along co-design
+    montage.png      the final robot in motion
+
+``--resume`` reloads ``checkpoint.pt`` and continues from the last completed unit of work;
+everything in it is restored (embedding, Adam state, random generator, buffer, finished
+co-design samples), so a resumed run repeats the uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from dbtool.atomic import atomic_write, atomic_write_text
+from dbtool.codesign.config import PRESETS, CodesignConfig, EmbeddingConfig, preset
+from dbtool.codesign.embedding import EmbeddingOptimiser, score
+from dbtool.codesign.langevin import codesign_sample
+from dbtool.sim.tasks import N_STEPS, get_task
+
+FORMAT = "dbtool.run/1"
+CHECKPOINT = "checkpoint.pt"
+
+
+class RunError(ValueError):
+    """A run directory or its checkpoint cannot be used."""
+
+
+@dataclass
+class Settings:
+    """What the user asked for (``dbtool design`` options)."""
+
+    task: str
+    preset: str = "quick"
+    seed: int = 0
+    epochs: int | None = None  # None: the preset's
+    start: str | None = None  # prompt c starts from; None: the null embedding
+    prompt: str | None = None  # text feedback (SPEC 6)
+    prompt_guidance: float = 3.0
+    samples: int | None = None  # co-designed samples; None: the preset's
+    kappa: float | None = None  # override Table 5's kappa (0: the ablation)
+    gamma: float | None = None  # override Table 5's gamma
+    n_steps: int = N_STEPS
+
+    def configs(self) -> tuple[EmbeddingConfig, CodesignConfig]:
+        if self.preset not in PRESETS:
+            raise RunError(f"unknown preset {self.preset!r}; choose one of {', '.join(PRESETS)}")
+        emb, cod = preset(self.preset, self.task)
+        if self.epochs is not None:
+            emb = replace(emb, epochs=self.epochs)
+        if self.kappa is not None:
+            cod = replace(cod, kappa=self.kappa)
+        if self.gamma is not None:
+            cod = replace(cod, gamma=self.gamma)
+        return emb, cod
+
+
+@dataclass
+class State:
+    """Everything a checkpoint holds."""
+
+    epoch: int = 0
+    rows: list[dict] = field(default_factory=list)
+    samples: list[dict] = field(default_factory=list)  # finished co-design samples
+
+
+def _savez(path: Path, **arrays) -> Path:
+    def save(tmp: str) -> None:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+
+    return atomic_write(path, save)
+
+
+class DesignRun:
+    """A run directory and the optimiser state behind it."""
+
+    def __init__(self, path: str | Path, settings: Settings, prior=None) -> None:
+        self.path = Path(path)
+        self.settings = settings
+        self.task = get_task(settings.task)
+        self.emb_cfg, self.cod_cfg = settings.configs()
+        if prior is None:
+            from dbtool.prior.pipeline import Prior
+
+            prior = Prior.load()
+        self.prior = prior
+        start = prior.embed(settings.start) if settings.start else torch.zeros(1, 384)
+        self.opt = EmbeddingOptimiser(prior, self.task, self.emb_cfg, start, seed=settings.seed,
+                                      n_steps=settings.n_steps)
+        self.state = State()
+
+    # ------------------------------------------------------------------ files
+    def config(self) -> dict:
+        return {"command": "design", "method": "diffusebot", "settings": asdict(self.settings),
+                "embedding": asdict(self.emb_cfg), "codesign": asdict(self.cod_cfg)}
+
+    def start(self, device: str) -> None:
+        """Create the run directory (refusing to overwrite another run)."""
+        from dbtool.runs import manifest, write_json
+
+        if (self.path / CHECKPOINT).exists() or (self.path / "design.npz").exists():
+            raise RunError(f"{self.path} already holds a run; use --resume or another "
+                           "--run-dir")
+        self.path.mkdir(parents=True, exist_ok=True)
+        write_json(self.path / "config.json", self.config())
+        write_json(self.path / "manifest.json", manifest(self.settings.seed, device))
+        self._write_metrics()
+
+    def log(self, **row) -> None:
+        self.state.rows.append(row)
+        self._write_metrics()
+
+    def _write_metrics(self) -> None:
+        text = "".join(json.dumps(r) + "\n" for r in self.state.rows)
+        atomic_write_text(self.path / "metrics.jsonl", text)
+
+    def checkpoint(self) -> None:
+        o = self.opt
+        buf = o.buffer.state()
+        ck = {"format": FORMAT, "settings": asdict(self.settings), "epoch": self.state.epoch,
+              "embedding": o.embedding.state_dict(), "adam": o.opt.state_dict(),
+              "generator": o.gen.get_state(), "history": json.dumps(o.history),
+              "buffer": {k: torch.as_tensor(v) for k, v in buf.items()},
+              "rows": json.dumps(self.state.rows), "samples": [
+                  {"cloud": torch.as_tensor(s["cloud"]), "metric": s["metric"],
+                   "controller": None if s["controller"] is None
+                   else torch.as_tensor(s["controller"])} for s in self.state.samples]}
+
+        def save(tmp: str) -> None:
+            bio = io.BytesIO()
+            torch.save(ck, bio)
+            Path(tmp).write_bytes(bio.getvalue())
+
+        atomic_write(self.path / CHECKPOINT, save)
+
+    @classmethod
+    def resume(cls, path: str | Path, prior=None) -> DesignRun:
+        """Reload a run directory from its checkpoint."""
+        path = Path(path)
+        ck_path = path / CHECKPOINT
+        if not path.is_dir() or not (path / "config.json").is_file():
+            raise RunError(f"{path} is not a dbtool run directory (no config.json)")
+        if not ck_path.is_file():
+            raise RunError(f"{path} has no checkpoint to resume from ({CHECKPOINT})")
+        try:
+            ck = torch.load(ck_path, map_location="cpu", weights_only=True)
+            if not isinstance(ck, dict) or ck.get("format") != FORMAT:
+                raise RunError(f"{ck_path} is not a dbtool run checkpoint")
+            run = cls(path, Settings(**ck["settings"]), prior)
+            o = run.opt
+            o.embedding.load_state_dict(ck["embedding"])
+            o.opt.load_state_dict(ck["adam"])
+            o.gen.set_state(ck["generator"])
+            o.history = json.loads(ck["history"])
+            o.epoch = int(ck["epoch"])
+            from dbtool.codesign.buffer import Buffer
+
+            o.buffer = Buffer.from_state(run.emb_cfg.buffer_size,
+                                         {k: v.numpy() for k, v in ck["buffer"].items()})
+            run.state = State(int(ck["epoch"]), json.loads(ck["rows"]), [
+                {"cloud": s["cloud"].numpy(), "metric": float(s["metric"]),
+                 "controller": None if s["controller"] is None else s["controller"].numpy()}
+                for s in ck["samples"]])
+        except RunError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - any damage gets the same one-line error
+            raise RunError(f"corrupt checkpoint {ck_path} ({exc.__class__.__name__}: "
+                           f"{str(exc)[:80]})") from None
+        return run
+
+    # ------------------------------------------------------------------ work
+    def conds(self) -> list[tuple[torch.Tensor, float]]:
+        """Guidance terms of the co-design sampler: the optimised embedding, plus the text
+        feedback prompt with its own weight (SPEC 6)."""
+        conds = [(self.opt.current(), self.emb_cfg.guidance)]
+        if self.settings.prompt:
+            conds.append((self.prior.embed(self.settings.prompt),
+                          self.settings.prompt_guidance))
+        return conds
+
+    def run(self, progress: bool = True):
+        """Finish the run from wherever it stands; returns the final :class:`Design`."""
+        from tqdm import tqdm
+
+        emb, cod = self.emb_cfg, self.cod_cfg
+        with tqdm(total=emb.epochs, initial=self.state.epoch, desc="embedding epochs",
+                  unit="epoch", disable=not progress or None, leave=False) as bar:
+            while self.state.epoch < emb.epochs:
+                row = self.opt.step()
+                row = {k: v for k, v in row.items()}
+                w = self.opt.embedding.weights()
+                if w is not None:
+                    row["top_weight"] = float(w.max())
+                self.state.epoch += 1
+                self.log(phase="embedding", **row)
+                self._save_best()
+                self.checkpoint()
+                bar.set_postfix(mean=f"{row['mean']:.4f}", max=f"{row['max']:.4f}")
+                bar.update(1)
+        n = self.settings.samples or cod.samples
+        conds = self.conds()
+        with tqdm(total=n, initial=len(self.state.samples), desc="co-design samples",
+                  unit="design", disable=not progress or None, leave=False) as bar:
+            while len(self.state.samples) < n:
+                k = len(self.state.samples)
+                seed = self.settings.seed * 1_000_003 + 10_007 * (k + 1)
+                res = codesign_sample(
+                    self.prior, self.task, conds, cod, seed=seed, steps=emb.sample_steps,
+                    n_steps=self.settings.n_steps,
+                    on_step=lambda r, k=k: self.log(phase="codesign", sample=k, **r))
+                metric = float(score(res.cloud[None], self.task, self.settings.n_steps,
+                                     controllers=[res.controller])[0])
+                self.state.samples.append({"cloud": res.cloud, "metric": metric,
+                                           "controller": res.controller})
+                self.log(phase="codesign", sample=k, final=True, metric=metric)
+                self.checkpoint()
+                bar.update(1)
+        return self.finish()
+
+    def _save_best(self, n: int = 8) -> None:
+        best = self.opt.buffer.best(n)
+        if best:
+            _savez(self.path / "best.npz", clouds=np.stack([e.cloud for e in best]),
+                   metrics=np.array([e.metric for e in best]),
+                   epochs=np.array([e.epoch for e in best]))
+
+    def finish(self):
+        """The best co-designed sample as the run's :class:`Design`, plus the figures."""
+        from dbtool.design import Design
+        from dbtool.robotize import robotize
+        from dbtool.sim.rollout import simulate
+        from dbtool.viz.render import montage
+
+        ok = [s for s in self.state.samples if np.isfinite(s["metric"])]
+        if not ok:
+            raise RunError("no co-designed sample could be robotized and simulated")
+        best = max(ok, key=lambda s: s["metric"])
+        robot = robotize(best["cloud"], self.task).robot.compact()
+        ctrl = best["controller"] if best["controller"] is not None else \
+            self.task.controller(self.settings.n_steps)
+        ro = simulate(self.task, robot, ctrl, n_steps=self.settings.n_steps)
+        surface = best["cloud"]
+        if getattr(self.prior, "upsampler", None) is not None:
+            surface = self.prior.upsample(best["cloud"][None], seed=self.settings.seed)[0]
+        meta = {"method": "diffusebot", "preset": self.settings.preset,
+                "seed": self.settings.seed, "prompt": self.settings.prompt,
+                "start": self.settings.start, "epochs": self.state.epoch,
+                "samples": [s["metric"] for s in self.state.samples]}
+        design = Design(self.task.name, robot, ctrl, surface, {self.task.name: ro.metric},
+                        meta)
+        design.save(self.path / "design.npz")
+        performance_figure(self.state.rows, self.path / "performance.png", self.task.title)
+        montage(ro.episode, ro.positions, self.path / "montage.png",
+                title=f"{self.task.title}: metric {ro.metric:.4f}")
+        return design
+
+
+def performance_figure(rows: list[dict], path: Path, title: str) -> Path:
+    """Mean and max performance per epoch, and the metric of x_t along co-design."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.2))
+    ep = [r for r in rows if r.get("phase") == "embedding"]
+    if ep:
+        a.plot([r["epoch"] for r in ep], [r["mean"] for r in ep], "o-", label="mean")
+        a.plot([r["epoch"] for r in ep], [r["max"] for r in ep], "s--", label="max")
+        a.legend()
+    a.set(xlabel="epoch", ylabel="performance", title="embedding optimisation")
+    cd = [r for r in rows if r.get("phase") == "codesign" and "metric" in r
+          and not r.get("final")]
+    for s in sorted({r["sample"] for r in cd}):
+        pts = [r for r in cd if r["sample"] == s]
+        b.plot(range(len(pts)), [r["metric"] for r in pts], "o-", label=f"sample {s}")
+    if cd:
+        b.legend(fontsize=7)
+    b.set(xlabel="Langevin step", ylabel="performance of x_t", title="diffusion as co-design")
+    fig.suptitle(title)
+    fig.tight_layout()
+    out = atomic_write(path, lambda p: fig.savefig(p, dpi=110, format="png"))
+    plt.close(fig)
+    return out

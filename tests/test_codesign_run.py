@@ -1,0 +1,151 @@
+"""Diffusion as co-design and the design run: Langevin update, files, resume, bad input."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+from dbtool.codesign import run as run_mod
+from dbtool.codesign.config import CodesignConfig
+from dbtool.codesign.langevin import clip_rms, codesign_sample, rms, stops
+from dbtool.codesign.run import DesignRun, RunError, Settings
+from dbtool.design import Design
+from dbtool.prior.pipeline import Prior
+from dbtool.sim.tasks import get_task
+
+STEPS = 6  # control steps per episode: enough to exercise everything, cheap
+
+
+@pytest.fixture(scope="module")
+def prior():
+    return Prior.load()
+
+
+def test_renorm_caps_the_per_point_rms_and_keeps_direction():
+    v = torch.randn(1, 50, 3) * 7
+    out = clip_rms(v, 2.0)
+    assert rms(out) == pytest.approx(2.0, rel=1e-5)
+    assert torch.allclose(out / out.norm(), v / v.norm(), atol=1e-6)
+    small = v * 1e-3
+    assert torch.equal(clip_rms(small, 2.0), small)
+    assert stops(CodesignConfig(t_max=400, dt=50)) == list(range(400, -1, -50))
+    assert stops(CodesignConfig(t_max=150, dt=25, t_min=50)) == [150, 125, 100, 75, 50]
+
+
+def test_codesign_sampler_logs_both_terms_and_co_optimises_the_controller(prior):
+    task = get_task("crawling")
+    cfg = CodesignConfig(t_max=200, dt=100, K=1, gamma=0.01)
+    rows = []
+    c = prior.embed("a block")
+    res = codesign_sample(prior, task, [(c, 3.0)], cfg, seed=0, steps=8, n_steps=STEPS,
+                          on_step=rows.append)
+    assert [r["t"] for r in rows] == [200, 100, 0]
+    phys = [r for r in rows if "physics_rms" in r]
+    assert phys, rows
+    for r in phys:
+        assert r["applied_rms"] <= cfg.renorm * (1 + 1e-5)
+        assert np.isfinite(r["metric"]) and r["score_rms"] > 0
+    assert res.cloud.shape == (1024, 3) and np.isfinite(res.cloud).all()
+    assert res.controller.shape == (STEPS, task.n_groups)
+    assert not np.allclose(res.controller, task.controller(STEPS))  # phi moved
+    assert np.abs(res.controller).max() <= 1.0
+    # kappa = 0 is the ablation: no simulator calls, the controller stays prescribed
+    rows0 = []
+    res0 = codesign_sample(prior, task, [(c, 3.0)], CodesignConfig(t_max=200, dt=100, K=1,
+                           kappa=0.0, gamma=0.01), seed=0, steps=8, n_steps=STEPS,
+                           on_step=rows0.append)
+    assert all("physics_rms" not in r for r in rows0)
+    assert np.allclose(res0.controller, task.controller(STEPS))
+
+
+def _settings(**kw):
+    base = dict(task="gripping", preset="quick", seed=3, epochs=2, samples=1, n_steps=STEPS)
+    base.update(kw)
+    return Settings(**base)
+
+
+class Interrupt(KeyboardInterrupt):
+    pass
+
+
+def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp_path,
+                                                                      monkeypatch):
+    a = DesignRun(tmp_path / "a", _settings(), prior)
+    a.start("cpu")
+    da = a.run(progress=False)
+    files = {p.name for p in (tmp_path / "a").iterdir()}
+    assert {"config.json", "manifest.json", "metrics.jsonl", "checkpoint.pt", "best.npz",
+            "design.npz", "performance.png", "montage.png"} <= files
+    assert not [f for f in files if f.startswith(".")]  # no temp file left behind
+    rows = [json.loads(line) for line in (tmp_path / "a" / "metrics.jsonl").open()]
+    assert [r["epoch"] for r in rows if r["phase"] == "embedding"] == [0, 1]
+    assert any(r["phase"] == "codesign" and "physics_rms" in r for r in rows)
+    back = Design.load(tmp_path / "a" / "design.npz")
+    assert back.surface.shape == (4096, 3) and back.task == "gripping"
+    assert back.metrics["gripping"] == pytest.approx(da.metrics["gripping"])
+
+    # the same run killed right after its first checkpoint (end of epoch 0), then resumed
+    b = DesignRun(tmp_path / "b", _settings(), prior)
+    b.start("cpu")
+    real = run_mod.DesignRun.checkpoint
+
+    def dying(self):
+        real(self)
+        raise Interrupt
+
+    monkeypatch.setattr(run_mod.DesignRun, "checkpoint", dying)
+    with pytest.raises(Interrupt):
+        b.run(progress=False)
+    monkeypatch.setattr(run_mod.DesignRun, "checkpoint", real)
+    assert not (tmp_path / "b" / "design.npz").exists()
+    rb = DesignRun.resume(tmp_path / "b", prior)
+    assert rb.state.epoch == 1
+    db = rb.run(progress=False)
+    assert db.metrics["gripping"] == pytest.approx(da.metrics["gripping"], rel=1e-4, abs=1e-7)
+    np.testing.assert_allclose(db.surface[:1024], da.surface[:1024], atol=1e-5)
+    rows_b = [json.loads(line) for line in (tmp_path / "b" / "metrics.jsonl").open()]
+    assert len(rows_b) == len(rows)
+
+    # a finished run refuses to be overwritten
+    with pytest.raises(RunError, match="already holds a run"):
+        DesignRun(tmp_path / "a", _settings(), prior).start("cpu")
+
+
+def test_resume_rejects_a_non_run_and_a_corrupt_checkpoint(prior, tmp_path):
+    with pytest.raises(RunError, match="not a dbtool run"):
+        DesignRun.resume(tmp_path, prior)
+    (tmp_path / "config.json").write_text("{}")
+    with pytest.raises(RunError, match="no checkpoint"):
+        DesignRun.resume(tmp_path, prior)
+    (tmp_path / "checkpoint.pt").write_bytes(b"garbage" * 10)
+    with pytest.raises(RunError, match="corrupt checkpoint"):
+        DesignRun.resume(tmp_path, prior)
+    with pytest.raises(RunError, match="unknown preset"):
+        _settings(preset="fast").configs()
+
+
+def _cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "dbtool.cli", *args], capture_output=True,
+                          text=True, cwd=cwd, timeout=600)
+
+
+def test_design_cli_bad_input_fails_cleanly(tmp_path):
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "config.json").write_text("{}")
+    (tmp_path / "run" / "checkpoint.pt").write_bytes(b"not a checkpoint")
+    before = (tmp_path / "run" / "checkpoint.pt").read_bytes()
+    cases = [(("design", "walking"), "unknown task"),
+             (("design", "crawling", "--preset", "fast"), "unknown preset"),
+             (("design", "crawling", "--resume", str(tmp_path / "nowhere")), "not a dbtool run"),
+             (("design", "crawling", "--resume", str(tmp_path / "run")), "corrupt checkpoint"),
+             (("design", "crawling", "--method", "magic"), "unknown method")]
+    for args, msg in cases:
+        out = _cli(*args, cwd=tmp_path)
+        assert out.returncode != 0, args
+        assert msg in out.stderr, (args, out.stderr[-400:])
+        assert "Traceback" not in out.stderr
+    assert (tmp_path / "run" / "checkpoint.pt").read_bytes() == before
+    assert not (tmp_path / "runs").exists()
