@@ -6,7 +6,7 @@ import torch
 
 from dbtool.codesign.buffer import Buffer
 from dbtool.codesign.config import TABLE4, TABLE5, preset
-from dbtool.codesign.embedding import EmbeddingOptimiser, train_step
+from dbtool.codesign.embedding import Embedding, EmbeddingOptimiser, caption_atoms, train_step
 from dbtool.prior.pipeline import Prior
 from dbtool.prior.shapes import make_shape
 from dbtool.sim.tasks import get_task
@@ -30,17 +30,19 @@ def test_paper_preset_is_tables_4_and_5():
         preset("quick", "walking")
 
 
-def test_buffer_keeps_top_k_plus_newest_and_is_a_fifo():
+def test_buffer_trains_on_its_elite_and_is_a_fifo():
     buf = Buffer(capacity=5)
     clouds = np.zeros((3, 4, 3))
     buf.add(clouds, np.array([0.3, 0.1, np.nan]), epoch=0)  # the failed design never enters
     buf.add(clouds, np.array([0.2, 0.5, 0.0]), epoch=1)
     assert len(buf) == 5
     ts = buf.training_set(top_k=1)
-    assert [e.metric for e in ts] == [0.5, 0.2, 0.0]  # best, then the rest of the newest epoch
+    assert [e.metric for e in ts] == [0.5]
+    assert [e.metric for e in buf.training_set(top_k=3)] == [0.5, 0.3, 0.2]
+    assert [e.metric for e in buf.newest()] == [0.2, 0.5, 0.0]
     buf.add(clouds[:2], np.array([0.05, 0.04]), epoch=2)
     assert len(buf) == 5 and [e.metric for e in buf.entries] == [0.2, 0.5, 0.0, 0.05, 0.04]
-    assert [e.metric for e in buf.training_set(top_k=2)] == [0.5, 0.2, 0.05, 0.04]
+    assert [e.metric for e in buf.training_set(top_k=2)] == [0.5, 0.2]
     back = Buffer.from_state(5, buf.state())
     assert [e.metric for e in back.entries] == [e.metric for e in buf.entries]
 
@@ -86,3 +88,32 @@ def test_one_epoch_samples_scores_and_trains():
     assert row["epoch"] == 0 and len(row["metrics"]) == 2 and row["buffer"] >= 1
     assert row["loss"] is not None and np.isfinite(row["loss"])
     assert opt.epoch == 1
+
+
+def test_embedding_starts_at_its_condition_and_stays_in_the_captions_hull():
+    prior = Prior.load(with_upsampler=False)
+    ball = prior.embed("a ball")
+    names, atoms = caption_atoms()
+    assert len(names) == 28 and "a ball" in names
+    emb = Embedding(ball, "captions")
+    w = emb.weights()
+    assert float(w[0]) == pytest.approx(0.9) and float(w.sum()) == pytest.approx(1.0)
+    # from the null embedding: 0.9 on the zero vector, so c is a tenth of the caption mean
+    null = Embedding(torch.zeros(1, 384), "captions")
+    assert torch.allclose(null(), 0.1 * atoms.mean(0, keepdim=True), atol=1e-6)
+    stars = np.stack([make_shape("star", i, "train", 0, 1024).points for i in range(4)])
+    buf = Buffer(4)
+    buf.add(stars, np.ones(4), 0)
+    opt = torch.optim.Adam(emb.parameters(), lr=0.3)
+    gen = torch.Generator().manual_seed(0)
+    for _ in range(20):
+        train_step(prior, emb, opt, buf.training_set(4), 4, gen)
+    w = emb.weights()
+    assert float(w.sum()) == pytest.approx(1.0) and float(w.min()) >= 0
+    assert float(w[0]) < 0.9  # weight left "a ball" for captions that explain the stars
+    star = [i for i, n in enumerate(names) if n == "a star"][0]
+    assert float(w[2 + star]) > 0.1 / 29  # "a star" gained weight
+    free = Embedding(ball, "free")
+    assert torch.equal(free().detach(), ball)
+    with pytest.raises(ValueError, match="unknown embedding space"):
+        Embedding(ball, "sphere")

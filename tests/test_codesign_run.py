@@ -149,3 +149,11 @@ def test_design_cli_bad_input_fails_cleanly(tmp_path):
         assert "Traceback" not in out.stderr
     assert (tmp_path / "run" / "checkpoint.pt").read_bytes() == before
     assert not (tmp_path / "runs").exists()
+
+
+def test_text_feedback_adds_its_own_guidance_term(prior, tmp_path):
+    run = DesignRun(tmp_path / "r", _settings(prompt="a star", prompt_guidance=2.0), prior)
+    (c, s), (h, sh) = run.conds()
+    assert s == run.emb_cfg.guidance and sh == 2.0
+    assert torch.allclose(h, prior.embed("a star"))
+    assert len(DesignRun(tmp_path / "q", _settings(), prior).conds()) == 1
