@@ -2,8 +2,9 @@
 
 * ``embedding``: embedding optimisation (quick preset) on crawling and gripping; mean
   performance of epoch 0's samples against the last epoch's, per seed.
-* ``kappa``: diffusion as co-design from the same embedding and seeds with kappa = 1e4 and
-  kappa = 0 (gamma = 0 for both), then kappa = 1e4 with the controller co-optimised.
+* ``kappa``: diffusion as co-design from the embedding ``embedding`` optimised for the same
+  task and seed, with kappa = 1e4 and kappa = 0 (gamma = 0 for both), then kappa = 1e4 with
+  the controller co-optimised.
 * ``text``: text feedback (balancing + "a ball", crawling + "a star"): Chamfer distance of the
   co-designed samples to that family's corpus shapes and their performance, with and without
   the prompt.
@@ -64,11 +65,20 @@ def embedding_run(prior, task, seed: int, epochs: int) -> dict:
     opt = EmbeddingOptimiser(prior, get_task(task), emb, torch.zeros(1, 384), seed=seed)
     rows = [opt.step() for _ in range(epochs)]
     return {"means": [r["mean"] for r in rows], "maxes": [r["max"] for r in rows],
-            "weights": opt.embedding.weights().tolist()}
+            "weights": opt.embedding.weights().tolist(), "c": opt.current()[0].tolist()}
+
+
+def optimised(task: str, seed: int, epochs: int, lr: float) -> torch.Tensor:
+    """The embedding that ``embedding`` optimised for (task, seed) (run that first)."""
+    path = CACHE / f"embedding-{task}-{seed}-{epochs}-lr{lr:g}.json"
+    if not path.is_file():
+        raise SystemExit(f"error: run `python benchmarks/codesign.py embedding --tasks {task} "
+                         f"--seeds {seed}` first ({path.name} is missing)")
+    return torch.tensor(json.loads(path.read_text())["c"])[None]
 
 
 def codesign_run(prior, task, seed: int, kappa: float, gamma: float | None,
-                 prompt: str | None = None) -> dict:
+                 prompt: str | None = None, c: torch.Tensor | None = None) -> dict:
     from dbtool.codesign.config import preset
     from dbtool.codesign.embedding import score
     from dbtool.codesign.langevin import codesign_sample
@@ -76,7 +86,7 @@ def codesign_run(prior, task, seed: int, kappa: float, gamma: float | None,
 
     emb, cod = preset("quick", task)
     cod = replace(cod, kappa=kappa, gamma=cod.gamma if gamma is None else gamma)
-    conds = [(torch.zeros(1, 384), emb.guidance)]  # the start embedding (null)
+    conds = [(torch.zeros(1, 384) if c is None else c, emb.guidance)]
     if prompt:
         conds.append((prior.embed(prompt), 3.0))
     t = get_task(task)
@@ -109,6 +119,7 @@ def main() -> None:
     ap.add_argument("--epochs", type=int, default=4)
     args = ap.parse_args()
 
+    from dbtool.codesign.config import preset
     from dbtool.prior.pipeline import Prior
     from dbtool.sim import runtime
 
@@ -117,7 +128,8 @@ def main() -> None:
     result: dict = {"experiment": args.experiment, "seeds": args.seeds}
     if args.experiment == "embedding":
         for task in args.tasks or ["crawling", "gripping"]:
-            runs = [cached(f"embedding-{task}-{s}-{args.epochs}",
+            lr = preset("quick", task)[0].lr
+            runs = [cached(f"embedding-{task}-{s}-{args.epochs}-lr{lr:g}",
                            lambda s=s, task=task: embedding_run(prior, task, s,
                                                                    args.epochs))
                     for s in args.seeds]
@@ -129,11 +141,13 @@ def main() -> None:
     elif args.experiment == "kappa":
         for task in args.tasks or ["crawling", "gripping"]:
             rows = {}
+            lr = preset("quick", task)[0].lr
             for name, kappa, gamma in (("kappa=0", 0.0, 0.0), ("kappa=1e4", 1e4, 0.0),
                                        ("kappa=1e4 + controller", 1e4, None)):
                 rows[name] = [cached(f"kappa-{task}-{name}-{s}",
-                                     lambda s=s, k=kappa, g=gamma, task=task: codesign_run(
-                                         prior, task, s, k, g))["metric"]
+                                     lambda s=s, k=kappa, g=gamma, task=task, lr=lr:
+                                     codesign_run(prior, task, s, k, g, c=optimised(
+                                         task, s, args.epochs, lr)))["metric"]
                               for s in args.seeds]
             result[task] = rows
             print(f"\n{task} (seeds {args.seeds})\n\n| sampler | final metric |\n| --- | ---: |")

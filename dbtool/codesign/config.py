@@ -24,7 +24,7 @@ class EmbeddingConfig:
     top_k: int = 6
     batch_size: int = 6
     epochs: int = 20  # not in Table 4
-    lr: float = 0.1  # Adam on the embedding's parameters; not in Table 4
+    lr: float = 1.0  # Adam on the embedding's parameters (simplex logits); not in Table 4
     guidance: float = 3.0  # classifier-free guidance while sampling designs (Point-E's 3)
     sample_steps: int = 64  # strided sampler steps per design
     loss_guidance: float = 1.0  # guidance of the predictor trained (1: conditional, as paper)
