@@ -144,7 +144,8 @@ def main() -> None:
             lr = preset("quick", task)[0].lr
             for name, kappa, gamma in (("kappa=0", 0.0, 0.0), ("kappa=1e4", 1e4, 0.0),
                                        ("kappa=1e4 + controller", 1e4, None)):
-                rows[name] = [cached(f"kappa-{task}-{name}-{s}",
+                slug = name.replace("kappa=", "k").replace(" + controller", "-ctrl")
+                rows[name] = [cached(f"kappa-{task}-{slug}-{s}",
                                      lambda s=s, k=kappa, g=gamma, task=task, lr=lr:
                                      codesign_run(prior, task, s, k, g, c=optimised(
                                          task, s, args.epochs, lr)))["metric"]
@@ -158,7 +159,7 @@ def main() -> None:
             prompt, family = TEXT_PAIRS[task]
             rows = {}
             for name, p in (("no prompt", None), (f"+ {prompt!r}", prompt)):
-                runs = [cached(f"text-{task}-{name}-{s}",
+                runs = [cached(f"text-{task}-{'prompt' if p else 'none'}-{s}",
                                lambda s=s, p=p, task=task: codesign_run(
                                    prior, task, s, 1e4, None, p))
                         for s in args.seeds]
