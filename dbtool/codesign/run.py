@@ -202,8 +202,7 @@ class DesignRun:
         with tqdm(total=emb.epochs, initial=self.state.epoch, desc="embedding epochs",
                   unit="epoch", disable=not progress or None, leave=False) as bar:
             while self.state.epoch < emb.epochs:
-                row = self.opt.step()
-                row = {k: v for k, v in row.items()}
+                row = dict(self.opt.step())  # the optimiser's history keeps its own row
                 w = self.opt.embedding.weights()
                 if w is not None:
                     row["top_weight"] = float(w.max())
