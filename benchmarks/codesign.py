@@ -95,16 +95,6 @@ def codesign_run(prior, task, seed: int, kappa: float, gamma: float | None,
     return {"metric": metric, "cloud": res.cloud.tolist()}
 
 
-def chamfer_to_family(cloud: np.ndarray, family: str, n: int = 8) -> float:
-    from dbtool.prior.metrics import chamfer_matrix
-    from dbtool.prior.shapes import make_shape
-
-    refs = np.stack([make_shape(family, i, "train", 0, 1024).points for i in range(n)])
-    d = chamfer_matrix(torch.as_tensor(cloud[None], dtype=torch.float32),
-                       torch.as_tensor(refs, dtype=torch.float32))
-    return float(d.min())
-
-
 def summary(values: list[float]) -> str:
     m = statistics.fmean(values)
     s = statistics.stdev(values) if len(values) > 1 else 0.0
@@ -120,6 +110,7 @@ def main() -> None:
     args = ap.parse_args()
 
     from dbtool.codesign.config import preset
+    from dbtool.prior.metrics import chamfer_to_family
     from dbtool.prior.pipeline import Prior
     from dbtool.sim import runtime
 

@@ -35,16 +35,14 @@
 import os
 from dataclasses import replace
 
-import numpy as np
 import torch
 from IPython.display import Image, display
 
 from dbtool.codesign.config import preset
 from dbtool.codesign.embedding import score
 from dbtool.codesign.langevin import codesign_sample
-from dbtool.prior.metrics import chamfer_matrix
+from dbtool.prior.metrics import chamfer_to_family
 from dbtool.prior.pipeline import Prior
-from dbtool.prior.shapes import make_shape
 from dbtool.robotize import robotize
 from dbtool.sim.tasks import get_task
 from dbtool.viz.robot import robot_figure
@@ -55,13 +53,6 @@ PAIRS = [("balancing", "a ball", "ball"), ("crawling", "a star", "star"),
          ("hurdling", "a pair of wings", "wings"), ("box", "thick", None)]
 prior = Prior.load(with_upsampler=False)
 null = torch.zeros(1, 384)
-
-
-def chamfer_to(cloud, family, n=8):
-    refs = np.stack([make_shape(family, i, "train", 0, 1024).points for i in range(n)])
-    d = chamfer_matrix(torch.as_tensor(cloud[None], dtype=torch.float32),
-                       torch.as_tensor(refs, dtype=torch.float32))
-    return float(d.min())
 
 
 # %% [markdown]
@@ -83,7 +74,7 @@ for task_name, prompt, family in PAIRS:
         res = codesign_sample(prior, task, conds, cod, seed=0, steps=SAMPLE_STEPS,
                               n_steps=N_STEPS)
         metric = float(score(res.cloud[None], task, N_STEPS, controllers=[res.controller])[0])
-        ch = chamfer_to(res.cloud, family) if family else float("nan")
+        ch = chamfer_to_family(res.cloud, family) if family else float("nan")
         out[label] = (res.cloud, metric, ch)
     rows.append((task_name, prompt, out))
     panels = []

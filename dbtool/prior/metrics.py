@@ -65,3 +65,14 @@ def spread(clouds: torch.Tensor) -> float:
     d = chamfer_matrix(clouds, clouds)
     n = len(clouds)
     return float(d.sum() / max(n * (n - 1), 1))
+
+
+def chamfer_to_family(cloud: np.ndarray, family: str, n: int = 8) -> float:
+    """Chamfer distance from ``cloud`` (N, 3) to the nearest of ``n`` training shapes of a
+    corpus family (the text-feedback measure of SPEC section 6)."""
+    from dbtool.prior.shapes import make_shape
+
+    refs = np.stack([make_shape(family, i, "train", 0, 1024).points for i in range(n)])
+    d = chamfer_matrix(torch.as_tensor(np.asarray(cloud)[None], dtype=torch.float32),
+                       torch.as_tensor(refs, dtype=torch.float32))
+    return float(d.min())
