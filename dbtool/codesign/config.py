@@ -46,7 +46,8 @@ class CodesignConfig:
     gamma: float = 0.001
     renorm: float = 10.0
     samples: int = 4  # co-designed samples; the best becomes the design (not in Table 5)
-    step_scale: float = 1.0  # Langevin step eta_t = step_scale * beta_t; not in Table 5
+    step_scale: float = 1.0  # eta_t = min(step_scale * beta_t, 1 - abar_t); not in Table 5
+    target: str = "x0"  # R evaluated on the denoiser's x0-estimate ("x0") or on x_t ("xt")
 
 
 TABLE4 = {
@@ -82,4 +83,22 @@ def preset(name: str, task: str) -> tuple[EmbeddingConfig, CodesignConfig]:
         emb = replace(emb, samples_per_epoch=12, min_buffer=12, buffer_size=12 * ratio,
                       top_k=3, batch_size=4, train_iters=4, epochs=4, sample_steps=32)
         cod = replace(cod, dt=100, K=1, samples=2)
+        paper = TABLE5[task]
+        cod = replace(cod, step_scale=drift_budget(paper) / drift_budget(cod),
+                      gamma=paper.gamma * n_steps(paper) / n_steps(cod))
     return emb, cod
+
+
+def n_steps(cfg: CodesignConfig) -> int:
+    """Langevin steps per sample: K at each stop."""
+    return cfg.K * len(range(cfg.t_max, cfg.t_min - 1, -cfg.dt))
+
+
+def drift_budget(cfg: CodesignConfig) -> float:
+    """``sum over stops of K * beta_t``: how far the Langevin steps of ``cfg`` can move x_t
+    in all (per unit drift). ``quick`` takes fewer, longer steps with the same budget as the
+    paper's schedule, via ``step_scale``."""
+    from dbtool.prior.diffusion import Diffusion
+
+    betas = Diffusion("cosine").betas
+    return cfg.K * float(sum(betas[t] for t in range(cfg.t_max, cfg.t_min - 1, -cfg.dt)))

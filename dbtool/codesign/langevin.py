@@ -4,18 +4,24 @@ Sampling runs with the optimised embedding. At every co-design stop
 ``t = t_max, t_max - dt, ..., t_min`` the sampler hands ``x_t`` (model space) to ``K`` steps of
 unadjusted Langevin dynamics (eq. 12) on ``log p(x_t | c) + kappa R(Psi(x_t), phi)``::
 
-    s      = -eps_guided(x_t, t, c) / sqrt(1 - abar_t)            # eq. 13, the model's score
-    g      = d R(Psi(x_t), phi) / d x_t                           # robotizer + simulator
+    eps    = eps_guided(x_t, t, c)
+    s      = -eps / sqrt(1 - abar_t)                              # eq. 13, the model's score
+    x0_hat = (x_t - sqrt(1 - abar_t) eps) / sqrt(abar_t)          # the denoiser's estimate
+    g      = d R(Psi(x0_hat), phi) / d x0_hat / sqrt(abar_t)      # robotizer + simulator
     p      = clip_rho(kappa * g)                                  # renormalised physics drift
     x_t   <- x_t + eta_t * (s + p) + sigma_t * z,   z ~ N(0, I)
-    phi   <- phi + gamma * d R / d phi                            # active tasks only
+    phi   <- clip(phi + gamma * d R / d phi, -1, 1)               # active tasks only
 
-with ``eta_t = step_scale * beta_t`` (the forward variance at t: the step the reverse process
-itself takes on the score), ``sigma_t = sigma_beta * beta_t`` (Table 5's noise scale) and
+``g`` scores the design x_t is heading to: the clean robotizer on the x0-estimate, chained to
+x_t with ``d x0_hat / d x_t ~ 1 / sqrt(abar_t)`` (the Jacobian of eps neglected).
+``target = "xt"`` instead robotizes x_t itself with the noise-aware robotizer of issue 4.
+``eta_t = min(step_scale * beta_t, 1 - abar_t)``: the forward variance at t (the step the
+reverse process itself takes on the score there), never more than the noise variance left;
+``sigma_t = sigma_beta * beta_t`` (Table 5's noise scale) and
 ``clip_rho(v) = v * min(1, rho / rms(v))`` where ``rms`` is the root mean square of the
 per-point vectors and ``rho`` is Table 5's renorm scale. Performance R is ascended (``+p``)
 and ``-log p`` descended (``+s``). The controller phi is the per-step actuation sequence,
-initialised from the task's prescribed controller and kept in [-1, 1].
+initialised from the task's prescribed controller.
 """
 
 from __future__ import annotations
@@ -59,11 +65,12 @@ class Physics:
 
 
 def physics(x_model: torch.Tensor, t: int, task: Task, phi: np.ndarray | None,
-            n_steps: int = N_STEPS) -> Physics:
-    """Robotize ``x_t`` (noise-aware, issue 4) and differentiate the episode."""
+            n_steps: int = N_STEPS, noisy: bool = True) -> Physics:
+    """Robotize ``x_model`` and differentiate the episode; ``noisy`` robotizes it as an x_t
+    (noise-aware, issue 4), otherwise as a clean cloud."""
     x = x_model.detach().reshape(-1, 3).double().numpy() / SCALE
-    ev = evaluate_full(x, task, phi, need_grad=True, noise=noise_std(t) if t > 0 else None,
-                       n_steps=n_steps)
+    noise = noise_std(t) if noisy and t > 0 else None
+    ev = evaluate_full(x, task, phi, need_grad=True, noise=noise, n_steps=n_steps)
     g = torch.as_tensor(ev.grad_x, dtype=torch.float32).reshape(-1, 3) / SCALE
     return Physics(ev.metric, g, ev.grad_actions)
 
@@ -101,15 +108,22 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
         t = step.t
         x = step.x
         beta = float(diff.betas[t])
-        eta, sigma = cfg.step_scale * beta, cfg.sigma_beta * beta
+        eta = min(cfg.step_scale * beta, 1.0 - float(diff.abar[t]))
+        sigma = cfg.sigma_beta * beta
         for k in range(cfg.K):
             eps = guided_eps(prior.eps, x, t, conds)
             score = -eps / float((1 - diff.abar[t]).sqrt())
             row = {"t": t, "k": k, "score_rms": rms(score)}
             drift = score
             if cfg.kappa > 0:
+                ab = float(diff.abar[t])
                 try:
-                    ph = physics(x, t, task, phi, n_steps)
+                    if cfg.target == "x0":  # x0_hat = (x_t - sqrt(1 - abar) eps) / sqrt(abar)
+                        x0 = (x - (1 - ab) ** 0.5 * eps) / ab ** 0.5
+                        ph = physics(x0, t, task, phi, n_steps, noisy=False)
+                        ph.grad_x = ph.grad_x / ab ** 0.5
+                    else:
+                        ph = physics(x, t, task, phi, n_steps)
                 except (RobotizeError, SimulationError, FloatingPointError) as exc:
                     row["error"] = str(exc)
                 else:

@@ -34,7 +34,9 @@ from dbtool.robotize.solid import (
     DOMAIN,
     SPAN,
     Placement,
-    grid_solid_box,
+    box_faces,
+    box_nodes,
+    fit_box,
     largest_component,
     occupancy,
     surface_slope,
@@ -174,14 +176,16 @@ def robotize(x, task: Task, cfg: RobotizeConfig | None = None, noise: float | No
         return _assemble(task, cfg, xt, occ, active, place, np.zeros(0), w, n, 0.0)
     chi, unit, w, n, noise = indicator(xt, cfg, noise)
     chi_np = chi.detach().numpy()
-    lo, hi, cells = grid_solid_box(chi_np)
+    lo, hi, cells = box_faces(chi, box_nodes(chi_np))
     if cells == 0:
         raise RobotizeError("the reconstructed solid is empty (no inside found)")
-    place = Placement.for_task(lo, hi, task)
-    pts = task.design_points()
+    centre, anchor, scale = fit_box(lo, hi, task.design_workspace(),
+                                    hang=task.name == "gripping")
+    place = Placement(centre.detach().numpy(), anchor.detach().numpy(), float(scale.detach()))
+    pts = torch.as_tensor(task.design_points(), dtype=dtype)
     slope = surface_slope(chi, unit, w)
-    q_prior = torch.as_tensor(place.to_prior(pts), dtype=dtype)
-    occ = occupancy(chi, slope, q_prior, SPACING / place.scale, cfg.softness)
+    q_prior = centre + (pts - anchor) / scale  # Placement.to_prior, differentiable in the box
+    occ = occupancy(chi, slope, q_prior, SPACING / scale, cfg.softness)
     active = (occ.detach().numpy() >= OCCUPANCY_THRESHOLD).reshape(lattice_dims(task))
     keep = largest_component(active).ravel()
     drop = torch.as_tensor(active.ravel() & ~keep)

@@ -47,13 +47,20 @@ def cluster_actuators(
     points: np.ndarray, active: np.ndarray, k: int, axes: tuple[int, ...], order_key
 ) -> np.ndarray:
     """One-hot actuator weights (N, k) from k-means of the active particles' coordinates
-    (centred on their mean) restricted to ``axes``; inactive particles join the nearest group.
+    (centred on their mean, each axis scaled by its spread) restricted to ``axes``; inactive
+    particles join the nearest group.
+
+    Scaling each axis to unit spread makes the grouping a continuous function of the shape: on
+    a long thin footprint the unscaled 2-D k-means has two optima (four stripes or four
+    quadrants) and a perturbation of 3e-4 of the cloud flipped a crawler between them. Scaled,
+    the quadrants are the clear optimum (SPEC section 2 names them).
 
     ``order_key(centroid_xyz) -> float`` sorts the groups so that controllers address them by a
     documented role (e.g. "nearer the obstacle first").
     """
     centre = points[active].mean(0)
     local = (points - centre)[:, list(axes)]
+    local = local / np.maximum(local[active].std(0), 1e-9)
     labels, cent = kmeans(local[active], k)
     full_cent = np.zeros((k, 3))
     full_cent[:, list(axes)] = cent
