@@ -157,3 +157,14 @@ def test_text_feedback_adds_its_own_guidance_term(prior, tmp_path):
     assert s == run.emb_cfg.guidance and sh == 2.0
     assert torch.allclose(h, prior.embed("a star"))
     assert len(DesignRun(tmp_path / "q", _settings(), prior).conds()) == 1
+
+
+def test_quick_preset_keeps_the_paper_schedules_drift_and_controller_budgets():
+    from dbtool.codesign.config import TABLE5, drift_budget, n_steps, preset
+
+    for task in ("landing", "crawling", "gripping"):
+        paper, quick = TABLE5[task], preset("quick", task)[1]
+        assert n_steps(quick) < n_steps(paper)
+        assert drift_budget(quick) * quick.step_scale == pytest.approx(drift_budget(paper))
+        assert quick.gamma * n_steps(quick) == pytest.approx(paper.gamma * n_steps(paper))
+        assert preset("paper", task)[1].step_scale == 1.0

@@ -152,3 +152,34 @@ def test_a_zero_thickness_sheet_is_never_a_silent_empty_robot():
         assert "solid" in str(e)
     else:
         assert r.active().sum() >= 100
+
+
+def test_placement_moves_continuously_with_the_cloud():
+    """The box faces are interpolated zero crossings: a 3e-4 perturbation moves the placement
+    by a small fraction of a DPSR cell (whole cells moved it by 0.006), and tiny ones by
+    proportionally less."""
+    task = get_task("crawling")
+    x = cloud("block").points.astype(float)
+    d = np.random.default_rng(0).standard_normal(x.shape)
+    base = robotize(x, task).placement
+    for eps, tol in ((3e-4, 1e-3), (3e-6, 1e-5)):
+        p = robotize(x + eps * d, task).placement
+        assert np.abs(p.centre - base.centre).max() < tol
+        assert abs(p.scale / base.scale - 1) < 10 * tol
+
+
+def test_crawling_groups_are_quadrants_even_on_a_long_thin_footprint():
+    """Per-axis scaling before k-means: a 6:1 plate still splits into the four quadrants the
+    crawling controller expects (unscaled k-means gives stripes or quadrants unpredictably)."""
+    from dbtool.sim.actuators import cluster_actuators
+
+    task = get_task("crawling")
+    g = np.stack(np.meshgrid(np.linspace(0, 0.06, 49), [0.0], np.linspace(0, 0.01, 9),
+                             indexing="ij"), -1).reshape(-1, 3)
+    w = cluster_actuators(g, np.ones(len(g), bool), 4, task.cluster_axes, task.group_order)
+    lab = w.argmax(1)
+    c = g - g.mean(0)
+    for j in range(4):
+        sel = (lab == j) & (np.abs(c[:, 0]) > 1e-9) & (np.abs(c[:, 2]) > 1e-9)
+        quad, count = np.unique(np.sign(c[sel][:, [0, 2]]), axis=0, return_counts=True)
+        assert count.max() >= 0.95 * sel.sum()  # (almost) all in one quadrant
