@@ -7,7 +7,8 @@
   the controller co-optimised.
 * ``text``: text feedback (balancing + "a ball", crawling + "a star"): Chamfer distance of the
   co-designed samples to that family's corpus shapes and their performance, with and without
-  the prompt.
+  the prompt, from the embedding optimised for (task, seed) where ``embedding`` ran it (else
+  from the null embedding).
 
 Each finished (experiment, task, seed) is cached in ``benchmarks/results/codesign-cache/`` so
 an interrupted run continues where it stopped. Prints markdown tables and writes
@@ -75,6 +76,17 @@ def optimised(task: str, seed: int, epochs: int, lr: float) -> torch.Tensor:
         raise SystemExit(f"error: run `python benchmarks/codesign.py embedding --tasks {task} "
                          f"--seeds {seed}` first ({path.name} is missing)")
     return torch.tensor(json.loads(path.read_text())["c"])[None]
+
+
+def start(task: str, seed: int) -> torch.Tensor | None:
+    """The text experiment's base condition: the embedding ``embedding`` optimised for (task,
+    seed) when that run is cached, else the null embedding."""
+    from dbtool.codesign.config import preset
+
+    try:
+        return optimised(task, seed, 4, preset("quick", task)[0].lr)
+    except SystemExit:
+        return None
 
 
 def codesign_run(prior, task, seed: int, kappa: float, gamma: float | None,
@@ -152,7 +164,7 @@ def main() -> None:
             for name, p in (("no prompt", None), (f"+ {prompt!r}", prompt)):
                 runs = [cached(f"text-{task}-{'prompt' if p else 'none'}-{s}",
                                lambda s=s, p=p, task=task: codesign_run(
-                                   prior, task, s, 1e4, None, p))
+                                   prior, task, s, 1e4, None, p, c=start(task, s)))
                         for s in args.seeds]
                 rows[name] = {"metric": [r["metric"] for r in runs],
                               "chamfer": [chamfer_to_family(np.array(r["cloud"]), family)
