@@ -176,7 +176,8 @@ def design(
     except (SimulationError, RunError, FloatingPointError) as exc:
         _fail(str(exc))
     metric = result.metrics[run.task.name]
-    typer.echo(f"{run.task.name}: final metric = {metric:.6f}")
+    typer.echo(f"{run.task.name}: final metric = {metric:.6f} "
+               f"(from {result.meta.get('source', 'co-design')})")
     typer.echo(f"design:  {run.path / 'design.npz'}")
 
 

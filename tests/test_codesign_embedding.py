@@ -45,6 +45,15 @@ def test_buffer_trains_on_its_elite_and_is_a_fifo():
     assert [e.metric for e in buf.training_set(top_k=2)] == [0.5, 0.2]
     back = Buffer.from_state(5, buf.state())
     assert [e.metric for e in back.entries] == [e.metric for e in buf.entries]
+    # the elite outlives the FIFO: epoch 0's 0.3 left the buffer but is still remembered
+    small = Buffer(capacity=2, keep=2)
+    small.add(clouds, np.array([0.3, 0.1, 0.0]), epoch=0)
+    small.add(clouds[:2], np.array([0.2, 0.05]), epoch=1)
+    assert [e.metric for e in small.entries] == [0.2, 0.05]
+    assert [(e.metric, e.epoch) for e in small.elite] == [(0.3, 0), (0.2, 1)]
+    assert small.training_set(top_k=2)[0].metric == 0.2  # training never sees the elite
+    again = Buffer.from_state(2, small.state())
+    assert [(e.metric, e.epoch) for e in again.elite] == [(0.3, 0), (0.2, 1)]
 
 
 def test_training_moves_only_the_embedding_and_fits_the_buffer():

@@ -6,6 +6,9 @@ gripping and moving a box the buffer is exactly one epoch of samples). The train
 ``top_k`` entries by performance: the top-k filter is the importance weighting of appendix B
 (it concentrates the data on high performance, like the elite set of the cross-entropy
 method).
+
+Separately from the FIFO, the buffer remembers the ``keep`` best designs ever seen (``elite``):
+training never uses them, but a run can still hand over a design that worked in an early epoch.
 """
 
 from __future__ import annotations
@@ -26,6 +29,8 @@ class Entry:
 class Buffer:
     capacity: int
     entries: list[Entry] = field(default_factory=list)
+    elite: list[Entry] = field(default_factory=list)  # the best designs ever added
+    keep: int = 8
 
     def __len__(self) -> int:
         return len(self.entries)
@@ -34,10 +39,10 @@ class Buffer:
         """Append a batch (oldest entries leave once ``capacity`` is exceeded)."""
         if len(clouds) != len(metrics):
             raise ValueError("clouds and metrics must have the same length")
-        for c, m in zip(clouds, metrics, strict=True):
-            if np.isfinite(m):
-                self.entries.append(Entry(np.asarray(c, np.float32), float(m), epoch))
-        self.entries = self.entries[-self.capacity:]
+        new = [Entry(np.asarray(c, np.float32), float(m), epoch)
+               for c, m in zip(clouds, metrics, strict=True) if np.isfinite(m)]
+        self.entries = (self.entries + new)[-self.capacity:]
+        self.elite = sorted(self.elite + new, key=lambda e: -e.metric)[:self.keep]
 
     def training_set(self, top_k: int) -> list[Entry]:
         """The ``top_k`` entries by metric, best first: the elite of the most recent designs
@@ -56,16 +61,25 @@ class Buffer:
 
     def state(self) -> dict:
         """Arrays for a checkpoint (``np.savez``)."""
-        if not self.entries:
-            return {"clouds": np.zeros((0, 0, 3), np.float32), "metrics": np.zeros(0),
-                    "epochs": np.zeros(0, int)}
-        return {"clouds": np.stack([e.cloud for e in self.entries]),
-                "metrics": np.array([e.metric for e in self.entries]),
-                "epochs": np.array([e.epoch for e in self.entries])}
+        out = {}
+        for prefix, entries in (("", self.entries), ("elite_", self.elite)):
+            if not entries:
+                out.update({f"{prefix}clouds": np.zeros((0, 0, 3), np.float32),
+                            f"{prefix}metrics": np.zeros(0), f"{prefix}epochs": np.zeros(0, int)})
+                continue
+            out.update({f"{prefix}clouds": np.stack([e.cloud for e in entries]),
+                        f"{prefix}metrics": np.array([e.metric for e in entries]),
+                        f"{prefix}epochs": np.array([e.epoch for e in entries])})
+        return out
 
     @classmethod
     def from_state(cls, capacity: int, state: dict) -> Buffer:
         buf = cls(capacity)
-        buf.entries = [Entry(c, float(m), int(ep)) for c, m, ep in
-                       zip(state["clouds"], state["metrics"], state["epochs"], strict=True)]
+        for prefix in ("", "elite_"):
+            if f"{prefix}clouds" not in state:  # checkpoints before the elite was kept
+                continue
+            entries = [Entry(c, float(m), int(ep)) for c, m, ep in
+                       zip(state[f"{prefix}clouds"], state[f"{prefix}metrics"],
+                           state[f"{prefix}epochs"], strict=True)]
+            setattr(buf, "elite" if prefix else "entries", entries)
         return buf

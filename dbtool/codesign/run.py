@@ -7,7 +7,7 @@ Files of a run (each written atomically: temp file, then rename)::
     manifest.json    versions, seed, git sha, device
     metrics.jsonl    one row per epoch and per co-design Langevin step
     checkpoint.pt    state after the last completed epoch / co-designed sample
-    best.npz         the buffer's best designs (clouds, metrics)
+    best.npz         the best designs of all embedding epochs (clouds, metrics)
     design.npz       the final robot (upsampled cloud, fields, controller, metric)
     performance.png  performance per epoch and along co-design
     montage.png      the final robot in motion
@@ -233,20 +233,25 @@ class DesignRun:
         return self.finish()
 
     def _save_best(self, n: int = 8) -> None:
-        best = self.opt.buffer.best(n)
+        best = self.opt.buffer.elite[:n]
         if best:
             _savez(self.path / "best.npz", clouds=np.stack([e.cloud for e in best]),
                    metrics=np.array([e.metric for e in best]),
                    epochs=np.array([e.epoch for e in best]))
 
     def finish(self):
-        """The best co-designed sample as the run's :class:`Design`, plus the figures."""
+        """The run's :class:`Design`, plus the figures: the best co-designed sample, unless a
+        design of the embedding epochs scored higher (``meta["source"]`` says which)."""
         from dbtool.design import Design
         from dbtool.robotize import robotize
         from dbtool.sim.rollout import simulate
         from dbtool.viz.render import montage
 
-        ok = [s for s in self.state.samples if np.isfinite(s["metric"])]
+        ok = [dict(s, source="co-design") for s in self.state.samples
+              if np.isfinite(s["metric"])]
+        elite = self.opt.buffer.elite[:1]
+        ok += [{"cloud": e.cloud, "metric": e.metric, "controller": None,
+                "source": f"embedding epoch {e.epoch}"} for e in elite]
         if not ok:
             raise RunError("no co-designed sample could be robotized and simulated")
         best = max(ok, key=lambda s: s["metric"])
@@ -260,7 +265,8 @@ class DesignRun:
         meta = {"method": "diffusebot", "preset": self.settings.preset,
                 "seed": self.settings.seed, "prompt": self.settings.prompt,
                 "start": self.settings.start, "epochs": self.state.epoch,
-                "samples": [s["metric"] for s in self.state.samples]}
+                "samples": [s["metric"] for s in self.state.samples],
+                "source": best["source"]}
         design = Design(self.task.name, robot, ctrl, surface, {self.task.name: ro.metric},
                         meta)
         design.save(self.path / "design.npz")
