@@ -152,6 +152,8 @@ def design(
         if resume is not None:
             runtime.init(arch=arch)
             run = DesignRun.resume(resume)
+            if run.settings.task != get_task(task).name:
+                raise RunError(f"{resume} is a {run.settings.task} run, not {task}")
             typer.echo(f"resuming {resume} at epoch {run.state.epoch}, "
                        f"{len(run.state.samples)} co-designed samples done")
         else:

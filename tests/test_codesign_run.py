@@ -112,6 +112,11 @@ def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp
     # a finished run refuses to be overwritten
     with pytest.raises(RunError, match="already holds a run"):
         DesignRun(tmp_path / "a", _settings(), prior).start("cpu")
+    # and resuming it under another task is refused
+    before = (tmp_path / "a" / "checkpoint.pt").read_bytes()
+    out = _cli("design", "crawling", "--resume", str(tmp_path / "a"), cwd=tmp_path)
+    assert out.returncode != 0 and "is a gripping run, not crawling" in out.stderr
+    assert (tmp_path / "a" / "checkpoint.pt").read_bytes() == before
 
 
 def test_resume_rejects_a_non_run_and_a_corrupt_checkpoint(prior, tmp_path):
