@@ -37,6 +37,7 @@ from dbtool.robotize.solid import (
     box_faces,
     box_nodes,
     fit_box,
+    hangs,
     largest_component,
     occupancy,
     surface_slope,
@@ -179,8 +180,7 @@ def robotize(x, task: Task, cfg: RobotizeConfig | None = None, noise: float | No
     lo, hi, cells = box_faces(chi, box_nodes(chi_np))
     if cells == 0:
         raise RobotizeError("the reconstructed solid is empty (no inside found)")
-    centre, anchor, scale = fit_box(lo, hi, task.design_workspace(),
-                                    hang=task.name == "gripping")
+    centre, anchor, scale = fit_box(lo, hi, task.design_workspace(), hang=hangs(task))
     place = Placement(centre.detach().numpy(), anchor.detach().numpy(), float(scale.detach()))
     pts = torch.as_tensor(task.design_points(), dtype=dtype)
     slope = surface_slope(chi, unit, w)

@@ -83,7 +83,12 @@ class Placement:
     def for_task(cls, lo: np.ndarray, hi: np.ndarray, task) -> Placement:
         """:meth:`fit` into ``task``'s design workspace; the gripper finger hangs from its
         glued base, every other body stands on the ground."""
-        return cls.fit(lo, hi, task.design_workspace(), hang=task.name == "gripping")
+        return cls.fit(lo, hi, task.design_workspace(), hang=hangs(task))
+
+
+def hangs(task) -> bool:
+    """The gripper finger hangs from its glued base; every other body stands on the ground."""
+    return task.name == "gripping"
 
 
 def fit_box(lo: torch.Tensor, hi: torch.Tensor, workspace, hang: bool = False
