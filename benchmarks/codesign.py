@@ -66,12 +66,29 @@ def embedding_run(prior, task, seed: int, epochs: int) -> dict:
     opt = EmbeddingOptimiser(prior, get_task(task), emb, torch.zeros(1, 384), seed=seed)
     rows = [opt.step() for _ in range(epochs)]
     return {"means": [r["mean"] for r in rows], "maxes": [r["max"] for r in rows],
+            "metrics": [r["metrics"] for r in rows],
             "weights": opt.embedding.weights().tolist(), "c": opt.current()[0].tolist()}
 
 
-def optimised(task: str, seed: int, epochs: int, lr: float) -> torch.Tensor:
+def embedding_key(task: str, seed: int, epochs: int) -> str:
+    """Cache name of an embedding run: the quick preset's settings that change it."""
+    from dbtool.codesign.config import preset
+
+    emb = preset("quick", task)[0]
+    return f"embedding-{task}-{seed}-{epochs}-lr{emb.lr:g}{tag(task)}"
+
+
+def tag(task: str) -> str:
+    """Suffix of the cache names of runs that start from an embedding optimised with the
+    elite in the training set (runs from the FIFO-only embeddings keep their old names)."""
+    from dbtool.codesign.config import preset
+
+    return "-elite" if preset("quick", task)[0].elite else ""
+
+
+def optimised(task: str, seed: int, epochs: int) -> torch.Tensor:
     """The embedding that ``embedding`` optimised for (task, seed) (run that first)."""
-    path = CACHE / f"embedding-{task}-{seed}-{epochs}-lr{lr:g}.json"
+    path = CACHE / f"{embedding_key(task, seed, epochs)}.json"
     if not path.is_file():
         raise SystemExit(f"error: run `python benchmarks/codesign.py embedding --tasks {task} "
                          f"--seeds {seed}` first ({path.name} is missing)")
@@ -81,10 +98,8 @@ def optimised(task: str, seed: int, epochs: int, lr: float) -> torch.Tensor:
 def start(task: str, seed: int) -> torch.Tensor | None:
     """The text experiment's base condition: the embedding ``embedding`` optimised for (task,
     seed) when that run is cached, else the null embedding."""
-    from dbtool.codesign.config import preset
-
     try:
-        return optimised(task, seed, 4, preset("quick", task)[0].lr)
+        return optimised(task, seed, 4)
     except SystemExit:
         return None
 
@@ -121,7 +136,6 @@ def main() -> None:
     ap.add_argument("--epochs", type=int, default=4)
     args = ap.parse_args()
 
-    from dbtool.codesign.config import preset
     from dbtool.prior.metrics import chamfer_to_family
     from dbtool.prior.pipeline import Prior
     from dbtool.sim import runtime
@@ -131,8 +145,7 @@ def main() -> None:
     result: dict = {"experiment": args.experiment, "seeds": args.seeds}
     if args.experiment == "embedding":
         for task in args.tasks or ["crawling", "gripping"]:
-            lr = preset("quick", task)[0].lr
-            runs = [cached(f"embedding-{task}-{s}-{args.epochs}-lr{lr:g}",
+            runs = [cached(embedding_key(task, s, args.epochs),
                            lambda s=s, task=task: embedding_run(prior, task, s,
                                                                    args.epochs))
                     for s in args.seeds]
@@ -144,14 +157,13 @@ def main() -> None:
     elif args.experiment == "kappa":
         for task in args.tasks or ["crawling", "gripping"]:
             rows = {}
-            lr = preset("quick", task)[0].lr
             for name, kappa, gamma in (("kappa=0", 0.0, 0.0), ("kappa=1e4", 1e4, 0.0),
                                        ("kappa=1e4 + controller", 1e4, None)):
                 slug = name.replace("kappa=", "k").replace(" + controller", "-ctrl")
-                rows[name] = [cached(f"kappa-{task}-{slug}-{s}",
-                                     lambda s=s, k=kappa, g=gamma, task=task, lr=lr:
+                rows[name] = [cached(f"kappa-{task}-{slug}-{s}{tag(task)}",
+                                     lambda s=s, k=kappa, g=gamma, task=task:
                                      codesign_run(prior, task, s, k, g, c=optimised(
-                                         task, s, args.epochs, lr)))["metric"]
+                                         task, s, args.epochs)))["metric"]
                               for s in args.seeds]
             result[task] = rows
             print(f"\n{task} (seeds {args.seeds})\n\n| sampler | final metric |\n| --- | ---: |")
@@ -162,7 +174,8 @@ def main() -> None:
             prompt, family = TEXT_PAIRS[task]
             rows = {}
             for name, p in (("no prompt", None), (f"+ {prompt!r}", prompt)):
-                runs = [cached(f"text-{task}-{'prompt' if p else 'none'}-{s}",
+                runs = [cached(f"text-{task}-{'prompt' if p else 'none'}-{s}"
+                               + (tag(task) if start(task, s) is not None else ""),
                                lambda s=s, p=p, task=task: codesign_run(
                                    prior, task, s, 1e4, None, p, c=start(task, s)))
                         for s in args.seeds]

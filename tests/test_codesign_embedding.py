@@ -51,9 +51,14 @@ def test_buffer_trains_on_its_elite_and_is_a_fifo():
     small.add(clouds[:2], np.array([0.2, 0.05]), epoch=1)
     assert [e.metric for e in small.entries] == [0.2, 0.05]
     assert [(e.metric, e.epoch) for e in small.elite] == [(0.3, 0), (0.2, 1)]
-    assert small.training_set(top_k=2)[0].metric == 0.2  # training never sees the elite
+    assert small.training_set(top_k=2)[0].metric == 0.2  # the FIFO alone forgets 0.3
+    # with the elite option training remembers it, and counts each design once
+    assert [(e.metric, e.epoch) for e in small.training_set(2, elite=True)] == [(0.3, 0),
+                                                                               (0.2, 1)]
     again = Buffer.from_state(2, small.state())
     assert [(e.metric, e.epoch) for e in again.elite] == [(0.3, 0), (0.2, 1)]
+    assert [(e.metric, e.epoch) for e in again.training_set(3, elite=True)] == [
+        (0.3, 0), (0.2, 1), (0.05, 1)]  # restored copies of one design are not doubled
 
 
 def test_training_moves_only_the_embedding_and_fits_the_buffer():

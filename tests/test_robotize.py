@@ -62,6 +62,7 @@ def test_placement_fits_the_workspace_on_the_floor_or_hanging_from_the_base():
         assert np.all(p >= 0) and np.all(p <= ws)
         if name == "gripping":
             assert p[:, 1].max() >= ws[1] - 2 * SPACING  # touches the glued base
+            assert p[:, 2].max() >= ws[2] - 2 * SPACING  # inner face next to the cube
         else:
             assert p[:, 1].min() <= 2 * SPACING  # stands on the ground
         filled = np.ptp(p, axis=0) + SPACING

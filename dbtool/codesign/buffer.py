@@ -7,8 +7,10 @@ gripping and moving a box the buffer is exactly one epoch of samples). The train
 (it concentrates the data on high performance, like the elite set of the cross-entropy
 method).
 
-Separately from the FIFO, the buffer remembers the ``keep`` best designs ever seen (``elite``):
-training never uses them, but a run can still hand over a design that worked in an early epoch.
+Separately from the FIFO, the buffer remembers the ``keep`` best designs ever seen (``elite``),
+so a run can hand over a design that worked in an early epoch. With ``elite=True`` the training
+set is the top-k of the FIFO and the elite together (an option, off in both presets: measured
+in docs/codesign.md, it did not help).
 """
 
 from __future__ import annotations
@@ -23,6 +25,12 @@ class Entry:
     cloud: np.ndarray  # (N, 3), prior frame
     metric: float
     epoch: int
+
+
+def _same(a: Entry, b: Entry) -> bool:
+    """One design (a checkpoint restores the FIFO and the elite as separate copies)."""
+    return (a is b or (a.epoch == b.epoch and a.metric == b.metric
+                       and np.array_equal(a.cloud, b.cloud)))
 
 
 @dataclass
@@ -44,10 +52,15 @@ class Buffer:
         self.entries = (self.entries + new)[-self.capacity:]
         self.elite = sorted(self.elite + new, key=lambda e: -e.metric)[:self.keep]
 
-    def training_set(self, top_k: int) -> list[Entry]:
-        """The ``top_k`` entries by metric, best first: the elite of the most recent designs
-        (the buffer is a FIFO, so old designs leave it)."""
-        return self.best(top_k)
+    def training_set(self, top_k: int, elite: bool = False) -> list[Entry]:
+        """The ``top_k`` entries by metric, best first: the best of the most recent designs
+        (the buffer is a FIFO, so old designs leave it), or with ``elite`` the best of those
+        and of the best designs ever seen."""
+        if not elite:
+            return self.best(top_k)
+        pool = list(self.entries)
+        pool += [e for e in self.elite if not any(_same(e, f) for f in self.entries)]
+        return sorted(pool, key=lambda e: -e.metric)[:top_k]
 
     def newest(self) -> list[Entry]:
         """The newest epoch's entries (unfiltered)."""

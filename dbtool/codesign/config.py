@@ -30,6 +30,7 @@ class EmbeddingConfig:
     loss_guidance: float = 1.0  # guidance of the predictor trained (1: conditional, as paper)
     space: str = "captions"  # where c lives: captions (convex hull) | free
     baseline: bool = False  # subtract the loss on the newest unfiltered samples
+    elite: bool = False  # train on the top-k of the FIFO and of the best designs ever
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,8 @@ on self-generated, performance-filtered designs with the diffusion loss, theta f
 Each epoch: sample ``samples_per_epoch`` designs from c, robotize and simulate them (forward
 only) to get their performance, add them to the buffer; once it holds ``min_buffer`` entries,
 run ``train_iters`` Adam steps on ``min_c E ||eps - eps_theta(x_t(x_0, eps), t, c)||^2`` with
-batches from the buffer's training set (top-k plus the newest samples). The condition is never
+batches from the buffer's training set (its top-k, with ``elite`` over the best designs
+ever seen as well). The condition is never
 dropped during these steps (``p_uncond = 0``): c is what is being learned.
 """
 
@@ -175,7 +176,7 @@ class EmbeddingOptimiser:
         self.buffer.add(clouds, metrics, self.epoch)
         losses = []
         if len(self.buffer) >= cfg.min_buffer:
-            entries = self.buffer.training_set(cfg.top_k)
+            entries = self.buffer.training_set(cfg.top_k, cfg.elite)
             base = self.buffer.newest() if cfg.baseline else None
             losses = [train_step(self.prior, self.embedding, self.opt, entries, cfg.batch_size,
                                  self.gen, cfg.loss_guidance, base)

@@ -73,7 +73,8 @@ class Placement:
     @classmethod
     def fit(cls, lo: np.ndarray, hi: np.ndarray, workspace, hang: bool = False) -> Placement:
         """Fit the box ``[lo, hi]`` (prior frame) into ``workspace``: uniform scale, centred
-        in x and z, on the floor (or hanging from the top when ``hang``)."""
+        in x and z, on the floor (or hanging from the top, inner face at ``+z``, when
+        ``hang``)."""
         centre, anchor, scale = fit_box(torch.as_tensor(lo, dtype=torch.float64),
                                         torch.as_tensor(hi, dtype=torch.float64), workspace,
                                         hang)
@@ -93,13 +94,18 @@ def hangs(task) -> bool:
 
 def fit_box(lo: torch.Tensor, hi: torch.Tensor, workspace, hang: bool = False
             ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """``(centre, anchor, scale)`` of :meth:`Placement.fit`, differentiable in the box."""
+    """``(centre, anchor, scale)`` of :meth:`Placement.fit`, differentiable in the box.
+
+    A standing body is centred in x and z on the floor. A hanging gripper finger (``hang``)
+    has its top at the base and its inner face (``+z``, toward the mirror plane) at the
+    workspace's inner boundary, next to the cube: centred, a slender finger would hang
+    0.01-0.02 away from the cube and never touch it (docs/robotize.md)."""
     ws = torch.as_tensor(np.asarray(workspace, float), dtype=lo.dtype)
     scale = (ws / (hi - lo).clamp_min(1e-9)).min()
     centre, anchor = (lo + hi) / 2, ws / 2
     if hang:
-        centre = torch.stack([centre[0], hi[1], centre[2]])
-        anchor = torch.stack([anchor[0], ws[1], anchor[2]])
+        centre = torch.stack([centre[0], hi[1], hi[2]])
+        anchor = torch.stack([anchor[0], ws[1], ws[2]])
     else:
         centre = torch.stack([centre[0], lo[1], centre[2]])
         anchor = torch.stack([anchor[0], ws[1] * 0, anchor[2]])

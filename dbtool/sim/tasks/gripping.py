@@ -1,9 +1,12 @@
 """Gripping (SPEC section 3, Figure 3e): two mirrored fingers under a glued base lift a cube.
 
-The design is one finger, in the half-workspace ``z < 0.06`` (0.06x0.08x0.06); the other finger
-is its mirror copy about the plane ``z = 0.06``. A base plate (the top 0.0075 of the full
-0.06x0.08x0.12 workspace) is glued to the upper boundary. The cube's centre sits 0.08 below the
-top of the workspace, resting on the ground; finger particles inside the cube are disabled.
+The design is one finger; the other finger is its mirror copy about the plane ``z = 0.06`` of
+the full 0.06x0.08x0.12 workspace. A base plate (its top 0.0075) is glued to the upper boundary.
+The cube's centre sits 0.08 below the top of the workspace, resting on the ground, under the
+mirror plane. The finger's own workspace is the part of ``z < 0.06`` outside the cube's
+footprint, less one particle spacing of clearance (0.06x0.0725x0.0425): the gripper is sized to
+its object, so a finger whose inner face is placed against that boundary touches the cube
+(:func:`dbtool.robotize.solid.fit_box`). Finger particles inside the cube are disabled.
 """
 
 from __future__ import annotations
@@ -38,7 +41,7 @@ class Gripping(Task):
     metric_range = (-0.02, 0.08)
 
     def design_workspace(self) -> tuple[float, float, float]:
-        return (FULL[0], FULL[1] - BASE, FULL[2] / 2)
+        return (FULL[0], FULL[1] - BASE, FULL[2] / 2 - CUBE / 2 - SPACING)
 
     def design_points(self) -> np.ndarray:
         return lattice(self.design_workspace(), SPACING)
