@@ -104,10 +104,11 @@ def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp
     rb = DesignRun.resume(tmp_path / "b", prior)
     assert rb.state.epoch == 1
     db = rb.run(progress=False)
-    assert db.metrics["gripping"] == pytest.approx(da.metrics["gripping"], rel=1e-4, abs=1e-7)
-    np.testing.assert_allclose(db.surface[:1024], da.surface[:1024], atol=1e-5)
+    # bit-identical, co-design included: the gradient episodes are deterministic
+    assert db.metrics["gripping"] == da.metrics["gripping"]
+    np.testing.assert_array_equal(db.surface, da.surface)
     rows_b = [json.loads(line) for line in (tmp_path / "b" / "metrics.jsonl").open()]
-    assert len(rows_b) == len(rows)
+    assert rows_b == rows
 
     # a finished run refuses to be overwritten
     with pytest.raises(RunError, match="already holds a run"):
