@@ -75,7 +75,7 @@ def embedding_key(task: str, seed: int, epochs: int) -> str:
     from dbtool.codesign.config import preset
 
     emb = preset("quick", task)[0]
-    return f"embedding-{task}-{seed}-{epochs}-lr{emb.lr:g}{tag(task)}"
+    return f"embedding-{task}-{seed}-{epochs}-lr{emb.lr:g}" + ("-elite" if emb.elite else "")
 
 
 def tag(task: str) -> str:
