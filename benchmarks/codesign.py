@@ -67,7 +67,8 @@ def embedding_run(prior, task, seed: int, epochs: int) -> dict:
     rows = [opt.step() for _ in range(epochs)]
     return {"means": [r["mean"] for r in rows], "maxes": [r["max"] for r in rows],
             "metrics": [r["metrics"] for r in rows],
-            "weights": opt.embedding.weights().tolist(), "c": opt.current()[0].tolist()}
+            "atoms": [r["atoms"] for r in rows], "weights": opt.embedding.weights().tolist(),
+            "c": opt.current()[0].tolist()}
 
 
 def embedding_key(task: str, seed: int, epochs: int) -> str:
@@ -75,15 +76,18 @@ def embedding_key(task: str, seed: int, epochs: int) -> str:
     from dbtool.codesign.config import preset
 
     emb = preset("quick", task)[0]
-    return f"embedding-{task}-{seed}-{epochs}-lr{emb.lr:g}" + ("-elite" if emb.elite else "")
+    return f"embedding-{task}-{seed}-{epochs}-lr{emb.lr:g}{tag(task)}"
 
 
 def tag(task: str) -> str:
-    """Suffix of the cache names of runs that start from an embedding optimised with the
-    elite in the training set (runs from the FIFO-only embeddings keep their old names)."""
+    """Suffix of the cache names of runs made with (or from an embedding optimised with) a
+    non-default space or the elite in the training set; runs of the first optimiser (the
+    captions hull, FIFO only) keep their old names."""
     from dbtool.codesign.config import preset
 
-    return "-elite" if preset("quick", task)[0].elite else ""
+    emb = preset("quick", task)[0]
+    return ("" if emb.space == "captions" else f"-{emb.space}") + ("-elite" if emb.elite
+                                                                    else "")
 
 
 def optimised(task: str, seed: int, epochs: int) -> torch.Tensor:

@@ -21,9 +21,10 @@
 # Algorithm 1 (SPEC section 4, Table 4): the conditioning embedding c is trained, with the
 # diffusion model frozen, on the best designs it produced. Each epoch samples designs from c,
 # robotizes and simulates them (forward only), adds them to a FIFO buffer and takes Adam steps
-# of the diffusion loss on the buffer's top-k. dbtool keeps c in the convex hull of the
-# caption embeddings the prior was trained on plus the null embedding (`docs/codesign.md`
-# explains why); it starts from the null embedding (weight 0.9).
+# of the diffusion loss on the buffer's top-k. dbtool's c is a mixture over the conditions the
+# prior was trained on (the null embedding and one caption per corpus family): each design is
+# sampled from one of them, and training moves weight onto the conditions the top-k came from
+# (`docs/codesign.md` explains why). From the null embedding the mixture starts uniform.
 #
 # For every task the notebook shows the best robot of each epoch and the mean and best
 # performance per epoch. Quick mode (`DBTOOL_QUICK=1`, used in CI) runs 2 epochs of 4 samples
@@ -64,8 +65,8 @@ def settings(task_name):
 # %% [markdown]
 # ## Epochs of each task
 #
-# The best design of every epoch (its robot, coloured by actuator group, and its metric) and the
-# caption that holds the most weight in c at the end.
+# The best design of every epoch (its robot, coloured by actuator group, its metric and the
+# condition it was sampled from) and the condition that holds the most weight in c at the end.
 
 # %%
 curves = {}
@@ -79,7 +80,8 @@ for task_name in TASKS:
         mine = [e for e in opt.buffer.entries if e.epoch == row["epoch"]]
         if mine:
             best = max(mine, key=lambda e: e.metric)
-            panels.append((f"epoch {row['epoch']}: {best.metric:.4f}",
+            panels.append((f"epoch {row['epoch']}: {best.metric:.4f}\n"
+                           f"{(['null'] + list(names))[best.atom]}",
                            robotize(best.cloud, task).robot))
     curves[task_name] = opt.history
     w = opt.embedding.weights()

@@ -131,3 +131,48 @@ def test_embedding_starts_at_its_condition_and_stays_in_the_captions_hull():
     assert torch.equal(free().detach(), ball)
     with pytest.raises(ValueError, match="unknown embedding space"):
         Embedding(ball, "sphere")
+
+
+def test_mixture_draws_designs_from_atoms_and_trains_toward_the_elite_atoms():
+    from dbtool.codesign.embedding import mixture_step
+
+    names, atoms = caption_atoms()
+    null = Embedding(torch.zeros(1, 384))  # the default space: a mixture over the atoms
+    assert null.space == "mixture" and len(null.atoms) == 29
+    w = null.weights()
+    assert torch.allclose(w, torch.full((29,), 1 / 29))  # the null start is uniform
+    prior = Prior.load(with_upsampler=False)
+    ball = Embedding(prior.embed("a ball"))
+    assert float(ball.weights()[0]) == pytest.approx(0.9)  # a prompt start keeps its weight
+    assert torch.equal(ball.condition(), ball.atoms[:1])  # the mode atom stands for c
+    k1 = null.draw(12, torch.Generator().manual_seed(3))
+    k2 = null.draw(12, torch.Generator().manual_seed(3))
+    assert torch.equal(k1, k2) and k1.min() >= 0 and k1.max() < 29
+    egg, cyl = 1 + names.index("an egg"), 1 + names.index("a cylinder")
+    buf = Buffer(6)
+    buf.add(np.zeros((6, 4, 3)), np.array([0.9, 0.8, 0.0, 0.0, 0.0, 0.0]), 0,
+            np.array([egg, cyl, 5, 6, 7, 8]))
+    back = Buffer.from_state(6, buf.state())
+    assert [e.atom for e in back.entries] == [egg, cyl, 5, 6, 7, 8]
+    opt = torch.optim.Adam(null.parameters(), lr=1.0)
+    gen = torch.Generator().manual_seed(0)
+    for _ in range(4):
+        mixture_step(null, opt, buf.training_set(2), 4, gen)
+    w = null.weights()
+    assert float(w[egg] + w[cyl]) > 0.9  # the weight went to the atoms the elite came from
+    assert torch.equal(null.condition(), null.atoms[int(w.argmax())][None])
+    buf.add(np.zeros((1, 4, 3)), np.ones(1), 1)  # a design without an atom
+    with pytest.raises(ValueError, match="record their atom"):
+        mixture_step(null, opt, buf.training_set(1), 1, gen)
+
+
+def test_prior_samples_one_condition_per_design():
+    prior = Prior.load(with_upsampler=False)
+    a, b = prior.embed("a ball"), prior.embed("a star")
+    both = prior.sample(embedding=torch.cat([a, b]), n=2, steps=4, seed=5).clouds
+    only_a = prior.sample(embedding=a, n=2, steps=4, seed=5).clouds
+    only_b = prior.sample(embedding=b, n=2, steps=4, seed=5).clouds
+    assert np.allclose(both[0], only_a[0], atol=1e-4) and np.allclose(both[1], only_b[1],
+                                                                       atol=1e-4)
+    with pytest.raises(ValueError, match="give 1 or n"):
+        prior.sample(embedding=torch.cat([a, b]), n=3, steps=2)

@@ -25,11 +25,12 @@ class Entry:
     cloud: np.ndarray  # (N, 3), prior frame
     metric: float
     epoch: int
+    atom: int = -1  # the mixture atom it was sampled from (-1: not a mixture design)
 
 
 def _same(a: Entry, b: Entry) -> bool:
     """One design (a checkpoint restores the FIFO and the elite as separate copies)."""
-    return (a is b or (a.epoch == b.epoch and a.metric == b.metric
+    return (a is b or (a.epoch == b.epoch and a.metric == b.metric and a.atom == b.atom
                        and np.array_equal(a.cloud, b.cloud)))
 
 
@@ -43,12 +44,14 @@ class Buffer:
     def __len__(self) -> int:
         return len(self.entries)
 
-    def add(self, clouds: np.ndarray, metrics: np.ndarray, epoch: int) -> None:
+    def add(self, clouds: np.ndarray, metrics: np.ndarray, epoch: int,
+            atoms: np.ndarray | None = None) -> None:
         """Append a batch (oldest entries leave once ``capacity`` is exceeded)."""
         if len(clouds) != len(metrics):
             raise ValueError("clouds and metrics must have the same length")
-        new = [Entry(np.asarray(c, np.float32), float(m), epoch)
-               for c, m in zip(clouds, metrics, strict=True) if np.isfinite(m)]
+        atoms = np.full(len(metrics), -1) if atoms is None else np.asarray(atoms)
+        new = [Entry(np.asarray(c, np.float32), float(m), epoch, int(a))
+               for c, m, a in zip(clouds, metrics, atoms, strict=True) if np.isfinite(m)]
         self.entries = (self.entries + new)[-self.capacity:]
         self.elite = sorted(self.elite + new, key=lambda e: -e.metric)[:self.keep]
 
@@ -78,11 +81,13 @@ class Buffer:
         for prefix, entries in (("", self.entries), ("elite_", self.elite)):
             if not entries:
                 out.update({f"{prefix}clouds": np.zeros((0, 0, 3), np.float32),
-                            f"{prefix}metrics": np.zeros(0), f"{prefix}epochs": np.zeros(0, int)})
+                            f"{prefix}metrics": np.zeros(0), f"{prefix}epochs": np.zeros(0, int),
+                            f"{prefix}atoms": np.zeros(0, int)})
                 continue
             out.update({f"{prefix}clouds": np.stack([e.cloud for e in entries]),
                         f"{prefix}metrics": np.array([e.metric for e in entries]),
-                        f"{prefix}epochs": np.array([e.epoch for e in entries])})
+                        f"{prefix}epochs": np.array([e.epoch for e in entries]),
+                        f"{prefix}atoms": np.array([e.atom for e in entries])})
         return out
 
     @classmethod
@@ -91,8 +96,10 @@ class Buffer:
         for prefix in ("", "elite_"):
             if f"{prefix}clouds" not in state:  # checkpoints before the elite was kept
                 continue
-            entries = [Entry(c, float(m), int(ep)) for c, m, ep in
+            n = len(state[f"{prefix}metrics"])
+            atoms = state.get(f"{prefix}atoms", np.full(n, -1))  # older checkpoints: none
+            entries = [Entry(c, float(m), int(ep), int(a)) for c, m, ep, a in
                        zip(state[f"{prefix}clouds"], state[f"{prefix}metrics"],
-                           state[f"{prefix}epochs"], strict=True)]
+                           state[f"{prefix}epochs"], atoms, strict=True)]
             setattr(buf, "elite" if prefix else "entries", entries)
         return buf

@@ -28,7 +28,7 @@ class EmbeddingConfig:
     guidance: float = 3.0  # classifier-free guidance while sampling designs (Point-E's 3)
     sample_steps: int = 64  # strided sampler steps per design
     loss_guidance: float = 1.0  # guidance of the predictor trained (1: conditional, as paper)
-    space: str = "captions"  # where c lives: captions (convex hull) | free
+    space: str = "mixture"  # where c lives: mixture of atoms | captions (convex hull) | free
     baseline: bool = False  # subtract the loss on the newest unfiltered samples
     elite: bool = False  # train on the top-k of the FIFO and of the best designs ever
 

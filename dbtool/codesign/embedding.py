@@ -25,6 +25,8 @@ from dbtool.robotize import RobotizeError, evaluate
 from dbtool.sim.simulator import SimulationError
 from dbtool.sim.tasks import N_STEPS, Task
 
+SPACES = ("mixture", "captions", "free")
+
 
 def score(clouds: np.ndarray, task: Task, n_steps: int = N_STEPS, progress=None,
           controllers: list | None = None) -> np.ndarray:
@@ -103,14 +105,21 @@ class Embedding(torch.nn.Module):
     ``free``: c itself (384 numbers). ``captions``: ``c = sum_k softmax(w)_k e_k`` over the
     family captions' embeddings, the start condition and the null (zero) embedding, so c stays
     in the convex hull of conditions the prior was trained on (docs/codesign.md: a free c
-    leaves that region within a few Adam steps and the samples degrade). Either way it starts
-    at the given condition (weight ``start_weight`` on it for ``captions``)."""
+    leaves that region within a few Adam steps and the samples degrade). ``mixture``: the same
+    atoms, but c is the mixture ``sum_k softmax(w)_k p(x | e_k)``: each design is sampled
+    from one atom, drawn with probability ``softmax(w)_k`` (docs/codesign.md: the blended
+    condition's elite is best explained by the start itself on gripping, so the hull never
+    moved toward the captions that grip). ``captions`` starts with weight ``start_weight`` on
+    the start; ``mixture`` starts uniform from the null embedding (the unconditional model is
+    the mixture of the corpus families, made explicit) and at ``start_weight`` from a prompt.
+    """
 
-    def __init__(self, start: torch.Tensor, space: str = "captions",
+    def __init__(self, start: torch.Tensor, space: str = "mixture",
                  start_weight: float = 0.9) -> None:
         super().__init__()
-        if space not in ("free", "captions"):
-            raise ValueError(f"unknown embedding space {space!r}; choose free or captions")
+        if space not in SPACES:
+            raise ValueError(f"unknown embedding space {space!r}; choose one of "
+                             f"{', '.join(SPACES)}")
         self.space = space
         start = start.detach().reshape(1, -1).float()
         if space == "free":
@@ -118,13 +127,14 @@ class Embedding(torch.nn.Module):
             return
         _, caps = caption_atoms()
         atoms = torch.cat([start, torch.zeros_like(start), caps])
-        if float(start.norm()) == 0:
+        null = float(start.norm()) == 0
+        if null:
             atoms = atoms[1:]  # the start is the null embedding
         self.register_buffer("atoms", atoms)
         n = len(atoms)
-        logit = float(np.log(start_weight * (n - 1) / (1 - start_weight)))
         w = torch.zeros(n)
-        w[0] = logit
+        if not (space == "mixture" and null):
+            w[0] = float(np.log(start_weight * (n - 1) / (1 - start_weight)))
         self.w = torch.nn.Parameter(w)
 
     def forward(self) -> torch.Tensor:
@@ -133,7 +143,40 @@ class Embedding(torch.nn.Module):
         return torch.softmax(self.w, 0)[None] @ self.atoms
 
     def weights(self) -> torch.Tensor | None:
-        return torch.softmax(self.w.detach(), 0) if self.space == "captions" else None
+        return None if self.space == "free" else torch.softmax(self.w.detach(), 0)
+
+    def condition(self) -> torch.Tensor:
+        """The single condition that stands for c, ``(1, D)``: c itself, or for ``mixture``
+        its most probable atom (what the co-design sampler is guided by)."""
+        with torch.no_grad():
+            if self.space == "mixture":
+                return self.atoms[int(self.w.argmax())][None].clone()
+            return self().detach().clone()
+
+    def draw(self, n: int, gen: torch.Generator) -> torch.Tensor:
+        """Atom indices of ``n`` designs of the mixture, ``k ~ softmax(w)``."""
+        return torch.multinomial(torch.softmax(self.w.detach(), 0), n, replacement=True,
+                                 generator=gen)
+
+
+def mixture_step(emb: Embedding, opt: torch.optim.Optimizer, entries: list[Entry],
+                 batch_size: int, gen: torch.Generator) -> float:
+    """One Adam step of the mixture's diffusion loss on a batch of the buffer's elite.
+
+    A design ``x`` sampled from atom ``k`` has the complete-data loss
+    ``-log p(x, k | w) = -log softmax(w)_k - log p_theta(x | e_k)``; the second term is the
+    diffusion (epsilon) loss of ``x`` under its own atom, which does not depend on ``w`` with
+    theta frozen, so the gradient w.r.t. ``w`` is that of ``-log softmax(w)_k``: the step
+    moves weight onto the atoms the elite came from (EM's M-step for mixture weights)."""
+    idx = torch.randint(len(entries), (batch_size,), generator=gen).tolist()
+    k = torch.as_tensor([entries[i].atom for i in idx])
+    if bool((k < 0).any()):
+        raise ValueError("mixture training needs designs that record their atom")
+    loss = -torch.log_softmax(emb.w, 0)[k].mean()
+    opt.zero_grad()
+    loss.backward()
+    opt.step()
+    return float(loss.detach())
 
 
 @dataclass
@@ -158,35 +201,48 @@ class EmbeddingOptimiser:
         self.gen = torch.Generator().manual_seed(self.seed)
 
     def current(self) -> torch.Tensor:
-        """The embedding now, ``(1, D)``, detached."""
-        with torch.no_grad():
-            return self.embedding().detach().clone()
+        """The embedding now as one condition, ``(1, D)``, detached
+        (:meth:`Embedding.condition`)."""
+        return self.embedding.condition()
 
-    def sample(self, n: int, seed: int) -> np.ndarray:
-        """``n`` designs (x_0 clouds, prior frame) from the current embedding."""
+    def sample(self, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+        """``n`` designs (x_0 clouds, prior frame) from the current embedding, and the atom
+        each was sampled from (-1 unless the space is ``mixture``)."""
+        atoms = np.full(n, -1)
+        cond = self.current()
+        if self.embedding.space == "mixture":
+            gen = torch.Generator().manual_seed(seed)
+            k = self.embedding.draw(n, gen)
+            atoms, cond = k.numpy(), self.embedding.atoms[k]
         with torch.no_grad():
-            return self.prior.sample(embedding=self.current(), n=n, guidance=self.cfg.guidance,
-                                     steps=self.cfg.sample_steps, seed=seed).clouds
+            clouds = self.prior.sample(embedding=cond, n=n, guidance=self.cfg.guidance,
+                                       steps=self.cfg.sample_steps, seed=seed).clouds
+        return clouds, atoms
 
     def step(self, progress=None) -> dict:
         """One epoch of Algorithm 1; returns (and records) its statistics."""
         cfg = self.cfg
-        clouds = self.sample(cfg.samples_per_epoch, seed=self.seed * 100_003 + self.epoch)
+        clouds, atoms = self.sample(cfg.samples_per_epoch,
+                                    seed=self.seed * 100_003 + self.epoch)
         metrics = score(clouds, self.task, self.n_steps, progress)
-        self.buffer.add(clouds, metrics, self.epoch)
+        self.buffer.add(clouds, metrics, self.epoch, atoms)
         losses = []
         if len(self.buffer) >= cfg.min_buffer:
             entries = self.buffer.training_set(cfg.top_k, cfg.elite)
-            base = self.buffer.newest() if cfg.baseline else None
-            losses = [train_step(self.prior, self.embedding, self.opt, entries, cfg.batch_size,
-                                 self.gen, cfg.loss_guidance, base)
-                      for _ in range(cfg.train_iters)]
+            if self.embedding.space == "mixture":
+                losses = [mixture_step(self.embedding, self.opt, entries, cfg.batch_size,
+                                       self.gen) for _ in range(cfg.train_iters)]
+            else:
+                base = self.buffer.newest() if cfg.baseline else None
+                losses = [train_step(self.prior, self.embedding, self.opt, entries,
+                                     cfg.batch_size, self.gen, cfg.loss_guidance, base)
+                          for _ in range(cfg.train_iters)]
         ok = metrics[np.isfinite(metrics)]
         row = {"epoch": self.epoch, "mean": float(ok.mean()) if len(ok) else float("nan"),
                "max": float(ok.max()) if len(ok) else float("nan"),
                "failed": int(len(metrics) - len(ok)), "buffer": len(self.buffer),
                "loss": float(np.mean(losses)) if losses else None,
-               "metrics": [float(m) for m in metrics]}
+               "metrics": [float(m) for m in metrics], "atoms": [int(a) for a in atoms]}
         self.history.append(row)
         self.epoch += 1
         return row

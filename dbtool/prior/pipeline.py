@@ -129,7 +129,8 @@ class Prior:
                embedding: torch.Tensor | None = None, extra: Sequence[tuple[str | torch.Tensor,
                float]] = (), return_at: Sequence[int] = (), upsample: bool = False,
                points: int = COARSE_POINTS, eta: float = 1.0) -> Samples:
-        """``n`` clouds per prompt (or for ``embedding``), classifier-free guided.
+        """``n`` clouds per prompt (or for ``embedding``: one, or one per sample),
+        classifier-free guided.
 
         ``eta`` = 1 (default) is strided DDPM, 0 is DDIM; DDPM gave sharper samples
         (``MODEL_CARD.md``). ``extra`` adds composed guidance terms
@@ -139,7 +140,11 @@ class Prior:
         for the same ``return_at``)."""
         conds: list[tuple[torch.Tensor, float]] = []
         if embedding is not None:
-            conds.append((embedding.reshape(1, -1).float(), guidance))
+            emb = embedding.float()
+            emb = emb.reshape(1, -1) if emb.dim() == 1 or emb.shape[0] == 1 else emb
+            if emb.shape[0] not in (1, n):
+                raise ValueError(f"{emb.shape[0]} embeddings for {n} samples; give 1 or n")
+            conds.append((emb, guidance))
         elif prompts is not None:
             plist = [prompts] if isinstance(prompts, str) else list(prompts)
             emb = self.embed(plist).repeat_interleave(n, 0)
