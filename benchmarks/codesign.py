@@ -5,6 +5,10 @@
 * ``kappa``: diffusion as co-design from the embedding ``embedding`` optimised for the same
   task and seed, with kappa = 1e4 and kappa = 0 (gamma = 0 for both), then kappa = 1e4 with
   the controller co-optimised.
+* ``conditions``: performance of the designs each condition of the mixture (null and one
+  caption per corpus family) samples, 4 per condition.
+* ``bandit``: a model of the mixture's embedding optimisation that replays the ``conditions``
+  map (a draw of condition k returns one of its measured metrics), for several optimisers.
 * ``text``: text feedback (balancing + "a ball", crawling + "a star"): Chamfer distance of the
   co-designed samples to that family's corpus shapes and their performance, with and without
   the prompt, from the embedding optimised for (task, seed) where ``embedding`` ran it (else
@@ -19,6 +23,8 @@ Usage::
     python benchmarks/codesign.py embedding --seeds 0 1 2
     python benchmarks/codesign.py kappa --seeds 0 1 2 3
     python benchmarks/codesign.py text --seeds 0 1 2 3
+    python benchmarks/codesign.py conditions --tasks gripping
+    python benchmarks/codesign.py bandit --tasks gripping
 """
 
 from __future__ import annotations
@@ -108,6 +114,45 @@ def start(task: str, seed: int) -> torch.Tensor | None:
         return None
 
 
+def conditions_run(prior, task: str, n: int = 4, seed: int = 7) -> dict:
+    """``n`` designs per mixture condition (guidance 3, 32 steps), scored."""
+    from dbtool.codesign.embedding import caption_atoms, score
+    from dbtool.sim.tasks import get_task
+
+    names, caps = caption_atoms()
+    out = {}
+    for name, e in zip(("null", *names), torch.cat([torch.zeros(1, 384), caps]), strict=True):
+        x = prior.sample(embedding=e[None], n=n, guidance=3.0, steps=32, seed=seed).clouds
+        ext = x.max(1) - x.min(1)
+        out[name] = {"metrics": score(x, get_task(task)).tolist(),
+                     "ext": (ext / ext.max(1, keepdims=True)).tolist()}
+        print(f"{task} {name}: {np.nanmean(out[name]['metrics']):+.5f}", flush=True)
+    return out
+
+
+def bandit(metrics: list[np.ndarray], optimiser: str, lr: float, rng, epochs: int = 4,
+           samples: int = 12, top_k: int = 3, batch: int = 4, iters: int = 4) -> list[float]:
+    """Epoch means of one modelled run of the mixture's embedding optimisation (the quick
+    preset's sizes): uniform start, draws of condition k replay its measured metrics."""
+    n = len(metrics)
+    w = torch.zeros(n, requires_grad=True)
+    opt = (torch.optim.Adam if optimiser == "adam" else torch.optim.SGD)([w], lr=lr)
+    means = []
+    for _ in range(epochs):
+        p = torch.softmax(w.detach(), 0).double().numpy()
+        ks = rng.choice(n, samples, p=p / p.sum())
+        ms = np.array([rng.choice(metrics[k]) for k in ks])
+        means.append(float(np.nanmean(ms)))
+        top = np.argsort(-np.where(np.isnan(ms), -np.inf, ms), kind="stable")[:top_k]
+        for _ in range(iters):
+            b = torch.as_tensor(ks[top[rng.integers(0, top_k, batch)]])
+            loss = -torch.log_softmax(w, 0)[b].mean()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+    return means
+
+
 def codesign_run(prior, task, seed: int, kappa: float, gamma: float | None,
                  prompt: str | None = None, c: torch.Tensor | None = None) -> dict:
     from dbtool.codesign.config import preset
@@ -134,7 +179,8 @@ def summary(values: list[float]) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("experiment", choices=["embedding", "kappa", "text"])
+    ap.add_argument("experiment", choices=["embedding", "kappa", "text", "conditions",
+                                           "bandit"])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--tasks", nargs="+")
     ap.add_argument("--epochs", type=int, default=4)
@@ -158,6 +204,36 @@ def main() -> None:
             result[task] = {"epoch0": first, "last": last, "runs": runs}
             print(f"\n{task}: epoch 0 mean {summary(first)}, epoch {args.epochs - 1} mean "
                   f"{summary(last)}")
+    elif args.experiment == "conditions":
+        for task in args.tasks or ["gripping"]:
+            result[task] = cached(f"conditions-{task}", lambda task=task: {
+                "conditions": conditions_run(prior, task)})["conditions"]
+            print(f"\n{task}\n\n| condition | mean metric | designs > 1e-4 |\n"
+                  "| --- | ---: | ---: |")
+            for name, r in result[task].items():
+                m = np.array(r["metrics"])
+                print(f"| {name} | {np.nanmean(m):.5f} | {int((m > 1e-4).sum())} / {len(m)} |")
+    elif args.experiment == "bandit":
+        for task in args.tasks or ["gripping"]:
+            path = CACHE / f"conditions-{task}.json"
+            if not path.is_file():
+                raise SystemExit(f"error: run `python benchmarks/codesign.py conditions --tasks "
+                                 f"{task}` first")
+            cond = json.loads(path.read_text())["conditions"]
+            metrics = [np.array(r["metrics"]) for r in cond.values()]
+            rows = {}
+            print(f"\n{task}\n\n| optimiser | epoch means | P(last > first) |\n"
+                  "| --- | --- | ---: |")
+            for name, lr in (("adam", 1.0), ("adam", 0.5), ("adam", 0.25), ("sgd", 1.0),
+                             ("sgd", 2.0), ("sgd", 4.0)):
+                rng = np.random.default_rng(0)
+                runs = np.array([bandit(metrics, name, lr, rng) for _ in range(400)])
+                rows[f"{name} {lr:g}"] = {"means": runs.mean(0).tolist(),
+                                          "p_up": float(np.mean(runs[:, -1] > runs[:, 0]))}
+                r = rows[f"{name} {lr:g}"]
+                print(f"| {name} {lr:g} | {', '.join(f'{m:.5f}' for m in r['means'])} | "
+                      f"{r['p_up']:.2f} |")
+            result[task] = rows
     elif args.experiment == "kappa":
         for task in args.tasks or ["crawling", "gripping"]:
             rows = {}
