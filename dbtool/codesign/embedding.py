@@ -161,7 +161,7 @@ class Embedding(torch.nn.Module):
 
 def mixture_step(emb: Embedding, opt: torch.optim.Optimizer, entries: list[Entry],
                  batch_size: int, gen: torch.Generator) -> float:
-    """One Adam step of the mixture's diffusion loss on a batch of the buffer's elite.
+    """One optimiser step of the mixture's diffusion loss on a batch of the buffer's elite.
 
     A design ``x`` sampled from atom ``k`` has the complete-data loss
     ``-log p(x, k | w) = -log softmax(w)_k - log p_theta(x | e_k)``; the second term is the
@@ -208,12 +208,11 @@ class EmbeddingOptimiser:
     def sample(self, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
         """``n`` designs (x_0 clouds, prior frame) from the current embedding, and the atom
         each was sampled from (-1 unless the space is ``mixture``)."""
-        atoms = np.full(n, -1)
-        cond = self.current()
         if self.embedding.space == "mixture":
-            gen = torch.Generator().manual_seed(seed)
-            k = self.embedding.draw(n, gen)
+            k = self.embedding.draw(n, torch.Generator().manual_seed(seed))
             atoms, cond = k.numpy(), self.embedding.atoms[k]
+        else:
+            atoms, cond = np.full(n, -1), self.current()
         with torch.no_grad():
             clouds = self.prior.sample(embedding=cond, n=n, guidance=self.cfg.guidance,
                                        steps=self.cfg.sample_steps, seed=seed).clouds
