@@ -9,6 +9,10 @@
   caption per corpus family) samples, 4 per condition.
 * ``bandit``: a model of the mixture's embedding optimisation that replays the ``conditions``
   map (a draw of condition k returns one of its measured metrics), for several optimisers.
+* ``linesearch``: the metric along the physics gradient at the kappa = 0 designs, with the
+  robot's thresholded and with smooth presence (is the gradient a direction of ascent?).
+* ``spread``: the spread of the kappa = 0 samples of one optimised embedding over 12 other
+  sampler seeds (how large a kappa effect 4 seeds can detect).
 * ``text``: text feedback (balancing + "a ball", crawling + "a star"): Chamfer distance of the
   co-designed samples to that family's corpus shapes and their performance, with and without
   the prompt, from the embedding optimised for (task, seed) where ``embedding`` ran it (else
@@ -96,6 +100,15 @@ def tag(task: str) -> str:
                                                                     else "")
 
 
+def move_tag(task: str, min_move: float | None) -> str:
+    """Suffix of co-design runs with a physics-step floor (none for the first runs, made
+    without it)."""
+    from dbtool.codesign.config import preset
+
+    mm = preset("quick", task)[1].min_move if min_move is None else min_move
+    return f"-mm{mm:g}" if mm > 0 else ""
+
+
 def optimised(task: str, seed: int, epochs: int) -> torch.Tensor:
     """The embedding that ``embedding`` optimised for (task, seed) (run that first)."""
     path = CACHE / f"{embedding_key(task, seed, epochs)}.json"
@@ -154,14 +167,19 @@ def bandit(metrics: list[np.ndarray], optimiser: str, lr: float, rng, epochs: in
 
 
 def codesign_run(prior, task, seed: int, kappa: float, gamma: float | None,
-                 prompt: str | None = None, c: torch.Tensor | None = None) -> dict:
+                 prompt: str | None = None, c: torch.Tensor | None = None,
+                 min_move: float | None = None, smooth: bool = False,
+                 step_scale: float | None = None) -> dict:
     from dbtool.codesign.config import preset
     from dbtool.codesign.embedding import score
     from dbtool.codesign.langevin import codesign_sample
     from dbtool.sim.tasks import get_task
 
     emb, cod = preset("quick", task)
-    cod = replace(cod, kappa=kappa, gamma=cod.gamma if gamma is None else gamma)
+    cod = replace(cod, kappa=kappa, gamma=cod.gamma if gamma is None else gamma,
+                  min_move=cod.min_move if min_move is None else min_move,
+                  smooth=smooth or cod.smooth,
+                  step_scale=cod.step_scale if step_scale is None else step_scale)
     conds = [(torch.zeros(1, 384) if c is None else c, emb.guidance)]
     if prompt:
         conds.append((prior.embed(prompt), 3.0))
@@ -169,6 +187,32 @@ def codesign_run(prior, task, seed: int, kappa: float, gamma: float | None,
     res = codesign_sample(prior, t, conds, cod, seed=seed, steps=emb.sample_steps)
     metric = float(score(res.cloud[None], t, controllers=[res.controller])[0])
     return {"metric": metric, "cloud": res.cloud.tolist()}
+
+
+def linesearch_run(task: str, seed: int, steps=(-0.001, 0.0002, 0.001, 0.005)) -> dict:
+    """Metric along the physics gradient at the kappa = 0 design of (task, seed): steps of
+    RMS ``a`` (prior frame) along ``g / rms(g)``, with the robot's thresholded presence (what
+    is scored) and with smooth presence; ``predicted`` is the first-order change."""
+    from dbtool.robotize import evaluate_full
+    from dbtool.sim.tasks import get_task
+
+    path = CACHE / f"kappa-{task}-k0-{seed}{tag(task)}.json"
+    if not path.is_file():
+        raise SystemExit(f"error: run `python benchmarks/codesign.py kappa --tasks {task} "
+                         f"--seeds {seed}` first")
+    x = np.array(json.loads(path.read_text())["cloud"])
+    t = get_task(task)
+    out = {}
+    for mode, thr in (("threshold", None), ("smooth", 0.0)):
+        ev = evaluate_full(x, t, None, need_grad=True, threshold=thr)
+        g = ev.grad_x.reshape(-1, 3)
+        r = float(np.sqrt((g ** 2).sum(1).mean()))
+        rows = []
+        for a in steps:
+            m = evaluate_full(x + a * g / r, t, None, need_grad=False, threshold=thr).metric
+            rows.append({"step": a, "metric": m, "predicted": ev.metric + a * r * len(x)})
+        out[mode] = {"metric": ev.metric, "grad_rms": r, "steps": rows}
+    return out
 
 
 def summary(values: list[float]) -> str:
@@ -180,10 +224,15 @@ def summary(values: list[float]) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("experiment", choices=["embedding", "kappa", "text", "conditions",
-                                           "bandit"])
+                                           "bandit", "linesearch", "spread"])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--tasks", nargs="+")
     ap.add_argument("--epochs", type=int, default=4)
+    ap.add_argument("--min-move", type=float, help="override the preset's min_move (kappa)")
+    ap.add_argument("--step-scale", type=float,
+                    help="override the preset's Langevin step_scale (kappa)")
+    ap.add_argument("--smooth", action="store_true",
+                    help="physics gradient with smooth presence (kappa)")
     args = ap.parse_args()
 
     from dbtool.prior.metrics import chamfer_to_family
@@ -234,16 +283,47 @@ def main() -> None:
                 print(f"| {name} {lr:g} | {', '.join(f'{m:.5f}' for m in r['means'])} | "
                       f"{r['p_up']:.2f} |")
             result[task] = rows
+    elif args.experiment == "linesearch":
+        for task in args.tasks or ["crawling", "gripping"]:
+            result[task] = {s: cached(f"linesearch-{task}-{s}{tag(task)}",
+                                      lambda s=s, task=task: linesearch_run(task, s))
+                            for s in args.seeds}
+            print(f"\n{task}\n\n| seed | presence | metric | grad rms | step: metric "
+                  "(first-order prediction) |\n| ---: | --- | ---: | ---: | --- |")
+            for s, r in result[task].items():
+                for mode, m in r.items():
+                    if mode == "seconds":
+                        continue
+                    cells = "; ".join(f"{x['step']:+g}: {x['metric']:.6f} ({x['predicted']:.4f})"
+                                      for x in m["steps"])
+                    print(f"| {s} | {mode} | {m['metric']:.6f} | {m['grad_rms']:.3g} | {cells} |")
+    elif args.experiment == "spread":
+        for task in args.tasks or ["crawling", "gripping"]:
+            result[task] = {s: cached(f"spread-{task}-{s}{tag(task)}", lambda s=s, task=task: {
+                "metrics": [codesign_run(prior, task, s + 1000 * (j + 1), 0.0, 0.0,
+                                         c=optimised(task, s, args.epochs))["metric"]
+                            for j in range(12)]})["metrics"] for s in args.seeds}
+            print(f"\n{task}: kappa = 0 samples of each seed's embedding (12 sampler seeds)\n\n"
+                  "| seed | mean | sd | min | max |\n| ---: | ---: | ---: | ---: | ---: |")
+            for s, m in result[task].items():
+                print(f"| {s} | {np.nanmean(m):.5f} | {np.nanstd(m, ddof=1):.5f} | "
+                      f"{np.nanmin(m):.5f} | {np.nanmax(m):.5f} |")
     elif args.experiment == "kappa":
         for task in args.tasks or ["crawling", "gripping"]:
             rows = {}
             for name, kappa, gamma in (("kappa=0", 0.0, 0.0), ("kappa=1e4", 1e4, 0.0),
                                        ("kappa=1e4 + controller", 1e4, None)):
                 slug = name.replace("kappa=", "k").replace(" + controller", "-ctrl")
-                rows[name] = [cached(f"kappa-{task}-{slug}-{s}{tag(task)}",
+                mm = (move_tag(task, args.min_move) + ("-smooth" if args.smooth else "")
+                      + (f"-ss{args.step_scale:g}" if args.step_scale is not None else "")
+                      if kappa > 0 else "")
+                rows[name] = [cached(f"kappa-{task}-{slug}-{s}{tag(task)}{mm}",
                                      lambda s=s, k=kappa, g=gamma, task=task:
                                      codesign_run(prior, task, s, k, g, c=optimised(
-                                         task, s, args.epochs)))["metric"]
+                                         task, s, args.epochs),
+                                         min_move=args.min_move,
+                                         smooth=args.smooth,
+                                         step_scale=args.step_scale))["metric"]
                               for s in args.seeds]
             result[task] = rows
             print(f"\n{task} (seeds {args.seeds})\n\n| sampler | final metric |\n| --- | ---: |")
@@ -266,8 +346,11 @@ def main() -> None:
             print(f"\n{task}\n\n| sampler | metric | Chamfer to {family} |\n| --- | ---: | ---: |")
             for name, r in rows.items():
                 print(f"| {name} | {summary(r['metric'])} | {summary(r['chamfer'])} |")
+    suffix = (f"-mm{args.min_move:g}" if args.min_move is not None else "") + (
+        "-smooth" if args.smooth else "") + (
+        f"-ss{args.step_scale:g}" if args.step_scale is not None else "")
     write_result(result, None, Path(__file__).parent / "results" /
-                 f"codesign-{args.experiment}.json", False)
+                 f"codesign-{args.experiment}{suffix}.json", False)
 
 
 if __name__ == "__main__":

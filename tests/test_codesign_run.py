@@ -61,6 +61,29 @@ def test_codesign_sampler_logs_both_terms_and_co_optimises_the_controller(prior)
     assert np.allclose(res0.controller, task.controller(STEPS))
 
 
+def test_min_move_lets_the_physics_term_act_at_t_zero(prior):
+    """At t = 0, beta_t ~ 0: without the floor the physics step vanishes; with ``min_move``
+    the K steps move the cloud by about ``min_move`` (model-space RMS). ``smooth`` scores the
+    robot with smooth presence (another metric, a smaller gradient)."""
+    task = get_task("crawling")
+    c = prior.embed("a block")
+    out = {}
+    for mm, smooth in ((0.0, False), (0.02, False), (0.02, True)):
+        rows = []
+        cfg = CodesignConfig(t_max=0, dt=100, K=1, kappa=1e9, gamma=0.0, min_move=mm,
+                             smooth=smooth)  # kappa: the renorm cap binds
+        res = codesign_sample(prior, task, [(c, 3.0)], cfg, seed=0, steps=8, n_steps=STEPS,
+                              on_step=rows.append)
+        assert [r["t"] for r in rows] == [0] and "physics_move" in rows[0], rows
+        out[mm, smooth] = (res.cloud, rows[0]["physics_move"], rows[0]["metric"])
+    out[0.0], out[0.02] = out[0.0, False], out[0.02, False]
+    assert out[0.0][1] < 1e-3
+    assert out[0.0][2] == out[0.02][2] != out[0.02, True][2]
+    assert out[0.02][1] == pytest.approx(0.02, rel=1e-4)
+    moved = 2.0 * np.sqrt(((out[0.02][0] - out[0.0][0]) ** 2).sum(1).mean())
+    assert 0.005 < moved < 0.04
+
+
 def _settings(**kw):
     base = dict(task="gripping", preset="quick", seed=3, epochs=2, samples=1, n_steps=STEPS)
     base.update(kw)

@@ -49,6 +49,8 @@ class CodesignConfig:
     samples: int = 4  # co-designed samples; the best becomes the design (not in Table 5)
     step_scale: float = 1.0  # eta_t = min(step_scale * beta_t, 1 - abar_t); not in Table 5
     target: str = "x0"  # R evaluated on the denoiser's x0-estimate ("x0") or on x_t ("xt")
+    min_move: float = 0.0  # floor of the physics displacement per stop (model-space RMS)
+    smooth: bool = False  # physics gradient of the robot with smooth presence (no threshold)
 
 
 TABLE4 = {

@@ -9,7 +9,7 @@ unadjusted Langevin dynamics (eq. 12) on ``log p(x_t | c) + kappa R(Psi(x_t), ph
     x0_hat = (x_t - sqrt(1 - abar_t) eps) / sqrt(abar_t)          # the denoiser's estimate
     g      = d R(Psi(x0_hat), phi) / d x0_hat / sqrt(abar_t)      # robotizer + simulator
     p      = clip_rho(kappa * g)                                  # renormalised physics drift
-    x_t   <- x_t + eta_t * (s + p) + sigma_t * z,   z ~ N(0, I)
+    x_t   <- x_t + eta_t * s + eta_R * p + sigma_t * z,   z ~ N(0, I)
     phi   <- clip(phi + gamma * d R / d phi, -1, 1)               # active tasks only
 
 ``g`` scores the design x_t is heading to: the clean robotizer on the x0-estimate, chained to
@@ -17,6 +17,9 @@ x_t with ``d x0_hat / d x_t ~ 1 / sqrt(abar_t)`` (the Jacobian of eps neglected)
 ``target = "xt"`` instead robotizes x_t itself with the noise-aware robotizer of issue 4.
 ``eta_t = min(step_scale * beta_t, 1 - abar_t)``: the forward variance at t (the step the
 reverse process itself takes on the score there), never more than the noise variance left;
+``eta_R = max(eta_t, min_move / (K * rho))`` is the physics term's step: the same as the
+score's except where ``beta_t`` vanishes (t -> 0), where the floor still lets the K steps move
+the cloud by ``min_move`` (RMS, model space) along the clipped gradient of its own design;
 ``sigma_t = sigma_beta * beta_t`` (Table 5's noise scale) and
 ``clip_rho(v) = v * min(1, rho / rms(v))`` where ``rms`` is the root mean square of the
 per-point vectors and ``rho`` is Table 5's renorm scale. Performance R is ascended (``+p``)
@@ -65,12 +68,14 @@ class Physics:
 
 
 def physics(x_model: torch.Tensor, t: int, task: Task, phi: np.ndarray | None,
-            n_steps: int = N_STEPS, noisy: bool = True) -> Physics:
+            n_steps: int = N_STEPS, noisy: bool = True, smooth: bool = False) -> Physics:
     """Robotize ``x_model`` and differentiate the episode; ``noisy`` robotizes it as an x_t
-    (noise-aware, issue 4), otherwise as a clean cloud."""
+    (noise-aware, issue 4), otherwise as a clean cloud; ``smooth`` simulates the robot with
+    smooth presence (occupancy-weighted mass, no threshold)."""
     x = x_model.detach().reshape(-1, 3).double().numpy() / SCALE
     noise = noise_std(t) if noisy and t > 0 else None
-    ev = evaluate_full(x, task, phi, need_grad=True, noise=noise, n_steps=n_steps)
+    ev = evaluate_full(x, task, phi, need_grad=True, noise=noise, n_steps=n_steps,
+                       threshold=0.0 if smooth else None)
     g = torch.as_tensor(ev.grad_x, dtype=torch.float32).reshape(-1, 3) / SCALE
     return Physics(ev.metric, g, ev.grad_actions)
 
@@ -110,31 +115,34 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
         beta = float(diff.betas[t])
         eta = min(cfg.step_scale * beta, 1.0 - float(diff.abar[t]))
         sigma = cfg.sigma_beta * beta
+        eta_r = max(eta, cfg.min_move / (cfg.K * cfg.renorm))
         for k in range(cfg.K):
             eps = guided_eps(prior.eps, x, t, conds)
             score = -eps / float((1 - diff.abar[t]).sqrt())
             row = {"t": t, "k": k, "score_rms": rms(score)}
-            drift = score
+            move = eta * score
             if cfg.kappa > 0:
                 ab = float(diff.abar[t])
                 try:
                     if cfg.target == "x0":  # x0_hat = (x_t - sqrt(1 - abar) eps) / sqrt(abar)
                         x0 = (x - (1 - ab) ** 0.5 * eps) / ab ** 0.5
-                        ph = physics(x0, t, task, phi, n_steps, noisy=False)
+                        ph = physics(x0, t, task, phi, n_steps, noisy=False,
+                                     smooth=cfg.smooth)
                         ph.grad_x = ph.grad_x / ab ** 0.5
                     else:
-                        ph = physics(x, t, task, phi, n_steps)
+                        ph = physics(x, t, task, phi, n_steps, smooth=cfg.smooth)
                 except (RobotizeError, SimulationError, FloatingPointError) as exc:
                     row["error"] = str(exc)
                 else:
                     raw = cfg.kappa * ph.grad_x.reshape(x.shape)
                     p = clip_rms(raw, cfg.renorm)
-                    drift = score + p
-                    row.update(metric=ph.metric, physics_rms=rms(raw), applied_rms=rms(p))
+                    move = move + eta_r * p
+                    row.update(metric=ph.metric, physics_rms=rms(raw), applied_rms=rms(p),
+                               physics_move=eta_r * rms(p))
                     if active and ph.grad_phi is not None:
                         phi = np.clip(phi + cfg.gamma * ph.grad_phi, -1.0, 1.0)
                         row["phi_grad"] = float(np.abs(ph.grad_phi).max())
-            x = x + eta * drift + sigma * torch.randn(x.shape, generator=gen)
+            x = x + move + sigma * torch.randn(x.shape, generator=gen)
             history.append(row)
             if on_step is not None:
                 on_step(row)
