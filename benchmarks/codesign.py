@@ -13,6 +13,8 @@
   robot's thresholded and with smooth presence (is the gradient a direction of ascent?).
 * ``spread``: the spread of the kappa = 0 samples of one optimised embedding over 12 other
   sampler seeds (how large a kappa effect 4 seeds can detect).
+* ``controller``: the kappa = 1e4 + controller samples again, each final design simulated
+  with its co-optimised and with the prescribed controller (a paired comparison).
 * ``text``: text feedback (balancing + "a ball", crawling + "a star"): Chamfer distance of the
   co-designed samples to that family's corpus shapes and their performance, with and without
   the prompt, from the embedding optimised for (task, seed) where ``embedding`` ran it (else
@@ -186,7 +188,11 @@ def codesign_run(prior, task, seed: int, kappa: float, gamma: float | None,
     t = get_task(task)
     res = codesign_sample(prior, t, conds, cod, seed=seed, steps=emb.sample_steps)
     metric = float(score(res.cloud[None], t, controllers=[res.controller])[0])
-    return {"metric": metric, "cloud": res.cloud.tolist()}
+    out = {"metric": metric, "cloud": res.cloud.tolist()}
+    if res.controller is not None and cod.gamma > 0:  # the same design, prescribed controller
+        out["metric_prescribed"] = float(score(res.cloud[None], t)[0])
+        out["controller"] = res.controller.tolist()
+    return out
 
 
 def linesearch_run(task: str, seed: int, steps=(-0.001, 0.0002, 0.001, 0.005)) -> dict:
@@ -212,6 +218,14 @@ def linesearch_run(task: str, seed: int, steps=(-0.001, 0.0002, 0.001, 0.005)) -
             m = evaluate_full(x + a * g / r, t, None, need_grad=False, threshold=thr).metric
             rows.append({"step": a, "metric": m, "predicted": ev.metric + a * r * len(x)})
         out[mode] = {"metric": ev.metric, "grad_rms": r, "steps": rows}
+        if mode == "threshold" and ev.grad_actions is not None:  # controller: phi + gamma g
+            u0 = np.array(t.controller(), float)
+            out["controller"] = []
+            for gamma in (0.09, 1.0, 10.0):
+                u = np.clip(u0 + gamma * ev.grad_actions, -1.0, 1.0)
+                m = evaluate_full(x, t, u, need_grad=False).metric
+                out["controller"].append({"gamma": gamma, "max_du": float(np.abs(u - u0).max()),
+                                          "metric": m})
     return out
 
 
@@ -224,7 +238,7 @@ def summary(values: list[float]) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("experiment", choices=["embedding", "kappa", "text", "conditions",
-                                           "bandit", "linesearch", "spread"])
+                                           "bandit", "linesearch", "spread", "controller"])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--tasks", nargs="+")
     ap.add_argument("--epochs", type=int, default=4)
@@ -292,11 +306,14 @@ def main() -> None:
                   "(first-order prediction) |\n| ---: | --- | ---: | ---: | --- |")
             for s, r in result[task].items():
                 for mode, m in r.items():
-                    if mode == "seconds":
+                    if mode not in ("threshold", "smooth"):
                         continue
                     cells = "; ".join(f"{x['step']:+g}: {x['metric']:.6f} ({x['predicted']:.4f})"
                                       for x in m["steps"])
                     print(f"| {s} | {mode} | {m['metric']:.6f} | {m['grad_rms']:.3g} | {cells} |")
+                for c in r.get("controller", []):
+                    print(f"| {s} | controller, gamma {c['gamma']:g} (max du {c['max_du']:.4f}) "
+                          f"| {c['metric']:.6f} | | |")
     elif args.experiment == "spread":
         for task in args.tasks or ["crawling", "gripping"]:
             result[task] = {s: cached(f"spread-{task}-{s}{tag(task)}", lambda s=s, task=task: {
@@ -308,6 +325,18 @@ def main() -> None:
             for s, m in result[task].items():
                 print(f"| {s} | {np.nanmean(m):.5f} | {np.nanstd(m, ddof=1):.5f} | "
                       f"{np.nanmin(m):.5f} | {np.nanmax(m):.5f} |")
+    elif args.experiment == "controller":
+        for task in args.tasks or ["crawling", "gripping"]:
+            runs = {s: cached(f"controller-{task}-{s}{tag(task)}",
+                              lambda s=s, task=task: codesign_run(
+                                  prior, task, s, 1e4, None, c=optimised(task, s, args.epochs)))
+                    for s in args.seeds}
+            result[task] = {s: {k: r[k] for k in ("metric", "metric_prescribed")}
+                            for s, r in runs.items()}
+            print(f"\n{task}: kappa = 1e4 + controller, final design with each controller\n\n"
+                  "| seed | prescribed | co-optimised |\n| ---: | ---: | ---: |")
+            for s, r in result[task].items():
+                print(f"| {s} | {r['metric_prescribed']:.5f} | {r['metric']:.5f} |")
     elif args.experiment == "kappa":
         for task in args.tasks or ["crawling", "gripping"]:
             rows = {}
@@ -325,10 +354,16 @@ def main() -> None:
                                          smooth=args.smooth,
                                          step_scale=args.step_scale))["metric"]
                               for s in args.seeds]
+            spread = [CACHE / f"spread-{task}-{s}{tag(task)}.json" for s in args.seeds]
+            if all(p.is_file() for p in spread):  # kappa = 0 over 13 sampler seeds per seed
+                rows["kappa=0, mean of 13 samples"] = [
+                    float(np.nanmean(json.loads(p.read_text())["metrics"] + [k0]))
+                    for p, k0 in zip(spread, rows["kappa=0"], strict=True)]
             result[task] = rows
-            print(f"\n{task} (seeds {args.seeds})\n\n| sampler | final metric |\n| --- | ---: |")
+            print(f"\n{task} (seeds {args.seeds})\n\n| sampler | final metric | per seed |\n"
+                  "| --- | ---: | --- |")
             for name, vals in rows.items():
-                print(f"| {name} | {summary(vals)} |")
+                print(f"| {name} | {summary(vals)} | {' / '.join(f'{v:.5f}' for v in vals)} |")
     else:
         for task in args.tasks or list(TEXT_PAIRS):
             prompt, family = TEXT_PAIRS[task]
