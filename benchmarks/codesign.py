@@ -171,7 +171,7 @@ def bandit(metrics: list[np.ndarray], optimiser: str, lr: float, rng, epochs: in
 def codesign_run(prior, task, seed: int, kappa: float, gamma: float | None,
                  prompt: str | None = None, c: torch.Tensor | None = None,
                  min_move: float | None = None, smooth: bool = False,
-                 step_scale: float | None = None) -> dict:
+                 step_scale: float | None = None, prompt_guidance: float = 3.0) -> dict:
     from dbtool.codesign.config import preset
     from dbtool.codesign.embedding import score
     from dbtool.codesign.langevin import codesign_sample
@@ -184,7 +184,7 @@ def codesign_run(prior, task, seed: int, kappa: float, gamma: float | None,
                   step_scale=cod.step_scale if step_scale is None else step_scale)
     conds = [(torch.zeros(1, 384) if c is None else c, emb.guidance)]
     if prompt:
-        conds.append((prior.embed(prompt), 3.0))
+        conds.append((prior.embed(prompt), prompt_guidance))
     t = get_task(task)
     res = codesign_sample(prior, t, conds, cod, seed=seed, steps=emb.sample_steps)
     metric = float(score(res.cloud[None], t, controllers=[res.controller])[0])
@@ -243,6 +243,8 @@ def main() -> None:
     ap.add_argument("--tasks", nargs="+")
     ap.add_argument("--epochs", type=int, default=4)
     ap.add_argument("--min-move", type=float, help="override the preset's min_move (kappa)")
+    ap.add_argument("--prompt-guidance", type=float, default=3.0,
+                    help="guidance weight of the text prompt (text)")
     ap.add_argument("--step-scale", type=float,
                     help="override the preset's Langevin step_scale (kappa)")
     ap.add_argument("--smooth", action="store_true",
@@ -368,11 +370,14 @@ def main() -> None:
         for task in args.tasks or list(TEXT_PAIRS):
             prompt, family = TEXT_PAIRS[task]
             rows = {}
+            pg = args.prompt_guidance
             for name, p in (("no prompt", None), (f"+ {prompt!r}", prompt)):
                 runs = [cached(f"text-{task}-{'prompt' if p else 'none'}-{s}"
-                               + (tag(task) if start(task, s) is not None else ""),
+                               + (tag(task) if start(task, s) is not None else "")
+                               + (f"-pg{pg:g}" if p and pg != 3.0 else ""),
                                lambda s=s, p=p, task=task: codesign_run(
-                                   prior, task, s, 1e4, None, p, c=start(task, s)))
+                                   prior, task, s, 1e4, None, p, c=start(task, s),
+                                   prompt_guidance=args.prompt_guidance))
                         for s in args.seeds]
                 rows[name] = {"metric": [r["metric"] for r in runs],
                               "chamfer": [chamfer_to_family(np.array(r["cloud"]), family)
@@ -383,7 +388,8 @@ def main() -> None:
                 print(f"| {name} | {summary(r['metric'])} | {summary(r['chamfer'])} |")
     suffix = (f"-mm{args.min_move:g}" if args.min_move is not None else "") + (
         "-smooth" if args.smooth else "") + (
-        f"-ss{args.step_scale:g}" if args.step_scale is not None else "")
+        f"-ss{args.step_scale:g}" if args.step_scale is not None else "") + (
+        f"-pg{args.prompt_guidance:g}" if args.prompt_guidance != 3.0 else "")
     write_result(result, None, Path(__file__).parent / "results" /
                  f"codesign-{args.experiment}{suffix}.json", False)
 

@@ -236,37 +236,61 @@ def _design_particle(task: str, iterations: int, steps: int, out: Path | None, s
 
 
 def _latest_design() -> Path | None:
-    found = sorted(Path("runs").glob("design-*/design.npz"), key=lambda p: p.stat().st_mtime)
+    found = sorted(Path("runs").glob("*/design.npz"), key=lambda p: p.stat().st_mtime)
     return found[-1] if found else None
 
 
 @app.command()
 def export(
-    design: Path = typer.Option(None, help="design file (default: the newest runs/design-*/)"),
-    stl: bool = typer.Option(False, "--stl", help="write STL meshes"),
-    threemf: bool = typer.Option(False, "--3mf", help="write 3MF meshes"),
-    out: Path = typer.Option(Path("exports"), help="output folder"),
-    scale: float = typer.Option(1000.0, help="millimetres per simulation unit"),
+    run_dir: Path = typer.Argument(None, help="run directory (default: the newest under runs/)"),
+    design: Path = typer.Option(None, help="a design file (.npz) instead of a run directory"),
+    stl: bool = typer.Option(False, "--stl", help="write binary STL meshes"),
+    threemf: bool = typer.Option(False, "--3mf", help="write assembly.3mf (one object per part)"),
+    channels: bool = typer.Option(False, "--channels", help="cut the tendon channels"),
+    channel_diameter: float = typer.Option(1.5, min=0.1, help="tendon channel diameter (mm)"),
+    min_wall: float = typer.Option(1.0, min=0.0, help="material kept around a channel (mm)"),
+    infill: str = typer.Option("none", help="none | voronoi (2.5 mm cells, 0.4 mm beams)"),
+    shell: float = typer.Option(1.2, min=0.1, help="solid skin around the infill (mm)"),
+    scale_mm: float = typer.Option(1000.0, "--scale-mm", min=1e-3,
+                                   help="mm per simulation unit (the finger: 60 x 72.5 x 42.5 mm)"),
+    out: Path = typer.Option(Path("exports"), help="parent folder; writes OUT/<design-name>/"),
 ) -> None:
-    """Export a design for fabrication: watertight meshes in mm and a report."""
+    """Export a design for fabrication (SPEC 8): watertight meshes in mm, the mirrored gripper
+    on its base with tendon routing, a report. With neither --stl nor --3mf, writes both."""
     from dbtool.design import Design, DesignFileError
-    from dbtool.export.assembly import export_design
+    from dbtool.export.assembly import ExportConfig, export_design
 
-    formats = [f for f, on in (("stl", stl), ("3mf", threemf)) if on] or ["stl"]
-    path = design or _latest_design()
+    if run_dir is not None and design is not None:
+        _fail("give a run directory or --design FILE, not both")
+    if run_dir is not None:
+        if not (run_dir / "design.npz").is_file():
+            _fail(f"{run_dir} holds no design.npz (is it a finished `dbtool design` run?)")
+        path = run_dir / "design.npz"
+    else:
+        path = design or _latest_design()
     if path is None:
         _fail("no design found under runs/; run `dbtool design TASK` or pass --design FILE")
+    if infill not in ("none", "voronoi"):
+        _fail(f"unknown infill {infill!r}: choose none or voronoi")
+    name = path.parent.name if path.name == "design.npz" else path.stem
+    cfg = ExportConfig(scale_mm=scale_mm, stl=stl or not threemf, threemf=threemf or not stl,
+                       channels=channels, channel_diameter=channel_diameter, min_wall=min_wall,
+                       infill=infill, shell=shell)
     try:
         d = Design.load(path)
-        rep = export_design(d, out / d.task, formats, scale)
-    except (DesignFileError, ValueError) as exc:
+        rep = export_design(d, out / name, cfg)
+    except (DesignFileError, ValueError, OSError) as exc:
         _fail(str(exc))
-    for f in rep["files"]:
-        typer.echo(f"wrote {f}")
-    a = rep["parts"]["assembly"]
-    typer.echo(f"assembly: watertight={a['watertight']} volume={a['volume_mm3']:.0f} mm^3 "
-               f"bbox={a['bbox_mm']} mm")
-    typer.echo(f"report:  {out / d.task / 'report.json'}")
+    for f in rep["files"] + ["report.json", "report.md"] + (
+            ["tendons.json", "tendons.png"] if "tendons" in rep else []):
+        typer.echo(f"wrote {out / name / f}")
+    main = rep["parts"]["assembly" if "assembly" in rep["parts"] else "body"]
+    typer.echo(f"{d.task}: watertight={main['watertight']} bodies={main['bodies']} "
+               f"volume={main['volume_mm3']:.0f} mm^3 bbox={main['bbox_mm']} mm")
+    if "tendons" in rep:
+        t = rep["tendons"]
+        typer.echo(f"tendons: {t['count']} x {t['points_per_tendon']} routing points, thinnest "
+                   f"wall around a channel {t['channel_clearance_mm']:.2f} mm")
 
 
 @app.command()

@@ -1,32 +1,198 @@
-"""Export: watertight manifold meshes in millimetres; the gripper assembly is one solid."""
+"""Export for fabrication (SPEC 8): watertight manifold parts in mm, the mirrored gripper on its
+base, tendon routing with clearance, channels, 3MF/STL round trips, atomic output folders."""
 
+import json
+import zipfile
+
+import manifold3d as m3
+import numpy as np
+import pytest
 import trimesh
+from scipy.spatial import cKDTree
 
 from dbtool.design import Design
-from dbtool.export.assembly import export_design
-from dbtool.sim.tasks import get_task
+from dbtool.export.assembly import ExportConfig, build, design_volume, export_design
+from dbtool.export.mesh import wall_thickness
+from dbtool.sim.robot import Robot
+from dbtool.sim.tasks import TASKS, get_task
+from dbtool.sim.tasks.gripping import FULL
 
 
-def test_gripper_assembly_is_one_watertight_solid(tmp_path):
+def _finger() -> Design:
     task = get_task("gripping")
-    d = Design("gripping", task.reference_robot("finger"), task.controller())
-    rep = export_design(d, tmp_path)
-    a = rep["parts"]["assembly"]
-    assert a["watertight"] and a["is_volume"]
-    assert a["genus"] == 0, "fingers and base must fuse into one connected solid"
-    assert a["bbox_mm"] == [60.0, 80.0, 120.0]
-    f, m = rep["parts"]["finger"], rep["parts"]["finger_mirror"]
-    assert abs(f["volume_mm3"] - m["volume_mm3"]) < 1e-6 * f["volume_mm3"]
-    mesh = trimesh.load(tmp_path / "gripping_assembly.stl")
-    assert mesh.is_watertight and abs(mesh.volume - a["volume_mm3"]) < 1e-3 * a["volume_mm3"]
-    assert (tmp_path / "report.json").exists()
+    return Design("gripping", task.reference_robot("finger"), task.controller())
 
 
-def test_body_export_volume_matches_occupancy(tmp_path):
+def _manifold(mesh: trimesh.Trimesh):
+    return m3.Manifold(m3.Mesh(vert_properties=np.asarray(mesh.vertices, np.float32),
+                               tri_verts=np.asarray(mesh.faces, np.uint32)))
+
+
+def _inside_with_clearance(solid, point, clearance: float) -> bool:
+    """A ball of ``clearance`` around ``point`` lies inside ``solid`` (circumscribed polygon)."""
+    seg = 48
+    ball = m3.Manifold.sphere(clearance / np.cos(np.pi / seg) ** 2, seg).translate(list(point))
+    return (ball - solid).volume() < 1e-6 * ball.volume()
+
+
+@pytest.fixture(scope="module")
+def gripper(tmp_path_factory):
+    out = tmp_path_factory.mktemp("export") / "finger"
+    rep = export_design(_finger(), out, ExportConfig(channels=True))
+    return out, rep
+
+
+def test_gripper_parts_are_single_watertight_volumes(gripper):
+    out, rep = gripper
+    for name in ("finger", "finger_mirror", "base", "assembly"):
+        p = rep["parts"][name]
+        assert p["watertight"] and p["is_volume"], name
+        assert p["manifold_status"] == "NoError" and p["bodies"] == 1, name
+    assert np.allclose(rep["parts"]["assembly"]["bbox_mm"], [60.0, 80.0, 120.0], atol=0.1)
+    assert rep["parts"]["base"]["genus"] == 4 + 4  # mounting holes + tendon exits
+    v = rep["volume_check"]
+    assert v["part"] == "finger" and abs(v["ratio"] - 1) < 0.1
+    assert {"finger.stl", "finger_mirror.stl", "base.stl", "assembly.stl",
+            "assembly.3mf"} <= set(rep["files"])
+    md = (out / "report.md").read_text()
+    assert "| finger | True | True | 1 |" in md
+
+
+def test_stl_and_3mf_round_trip_the_volumes(gripper):
+    out, rep = gripper
+    for name in ("finger", "finger_mirror", "base", "assembly"):
+        mesh = trimesh.load(out / f"{name}.stl")
+        assert mesh.is_watertight and mesh.is_volume
+        assert abs(mesh.volume - rep["parts"][name]["volume_mm3"]) < 1e-4 * mesh.volume
+    with zipfile.ZipFile(out / "assembly.3mf") as z:
+        model = z.read("3D/3dmodel.model").decode()
+    assert 'unit="millimeter"' in model
+    scene = trimesh.load(out / "assembly.3mf")  # trimesh's reader (lxml)
+    assert len(scene.geometry) == 3
+    vols = sorted(g.volume for g in scene.geometry.values())
+    want = sorted(rep["parts"][n]["volume_mm3"] for n in ("finger", "finger_mirror", "base"))
+    assert np.allclose(vols, want, rtol=1e-4)
+
+
+def test_mirror_finger_is_the_exact_reflection(gripper):
+    out, _ = gripper
+    a = trimesh.load(out / "finger.stl").vertices
+    b = trimesh.load(out / "finger_mirror.stl").vertices.copy()
+    b[:, 2] = FULL[2] * 1000.0 - b[:, 2]  # reflect back about the mirror plane z = 60 mm
+    hausdorff = max(cKDTree(a).query(b)[0].max(), cKDTree(b).query(a)[0].max())
+    assert hausdorff < 1e-3
+
+
+def test_tendons_have_four_routing_points_inside_with_clearance(gripper):
+    out, rep = gripper
+    tj = json.loads((out / "tendons.json").read_text())
+    assert tj["units"] == "mm"
+    tendons = tj["tendons"]
+    assert len(tendons) == 4
+    assert {(t["finger"], t["role"]) for t in tendons} == {
+        (f, r) for f in ("finger", "finger_mirror") for r in ("flexion", "extension")}
+    d = _finger()
+    solid = build(d, ExportConfig()).parts  # the fingers without channels
+    need = tj["channel_diameter_mm"] / 2 + tj["min_wall_mm"]
+    for t in tendons:
+        pts = np.array(t["points"])
+        assert pts.shape == (4, 3)
+        assert np.all(np.diff(pts[:, 1]) < 0), "root to tip: y decreases"
+        assert t["anchor"] == t["points"][-1] and t["exit"][1] == pytest.approx(80.0)
+        for p in pts:
+            assert _inside_with_clearance(solid[t["finger"]], p, need - 0.05), (t["name"], p)
+        # flexion sits on the side facing the object (toward the mirror plane), extension away
+        plane = FULL[2] * 1000.0 / 2
+        toward = np.abs(pts[:, 2] - plane)
+        other = next(o for o in tendons if o["finger"] == t["finger"] and o is not t)
+        if t["role"] == "flexion":
+            assert np.all(toward < np.abs(np.array(other["points"])[:, 2] - plane))
+    assert (out / "tendons.png").stat().st_size > 10_000
+    assert rep["tendons"]["all_points_clear"]
+    assert rep["tendons"]["channel_clearance_mm"] >= tj["min_wall_mm"] - 0.26
+
+
+def test_channels_keep_one_body_and_the_wall_around_them(gripper):
+    _, rep = gripper
+    plain = build(_finger(), ExportConfig())
+    f = rep["parts"]["finger"]
+    assert f["bodies"] == 1 and f["watertight"]
+    assert f["volume_mm3"] < plain.parts["finger"].volume()  # material was cut
+    # the ray-cast wall check sees the channel walls: about min_wall, not less than it - 0.1
+    assert 0.9 <= f["min_wall_mm"] <= 1.5
+    assert np.isinf(wall_thickness(plain.parts["finger"])).mean() > 0.5
+
+
+@pytest.mark.parametrize("task", sorted(set(TASKS) - {"gripping"}))
+def test_body_and_actuator_regions_of_every_task(task, tmp_path):
+    t = get_task(task)
+    d = Design(task, t.reference_robot("star"), t.controller())
+    rep = export_design(d, tmp_path / task, ExportConfig(threemf=True))
+    parts = rep["parts"]
+    for name, p in parts.items():
+        assert p["watertight"] and p["is_volume"] and p["bodies"] == 1, (name, p)
+    v = rep["volume_check"]
+    assert abs(v["ratio"] - 1) < 0.1, v
+    regions = [k for k in parts if k.startswith("actuator_")] or ["body"]  # passive: the body
+    assert len(regions) >= max(t.n_groups, 1) - 1
+    total = sum(parts[k]["volume_mm3"] for k in regions)
+    assert abs(total - parts["body"]["volume_mm3"]) < 0.02 * parts["body"]["volume_mm3"]
+    scene = trimesh.load(tmp_path / task / "assembly.3mf")
+    assert len(scene.geometry) == len(regions)
+    assert sum(g.volume for g in scene.geometry.values()) == pytest.approx(total, rel=1e-4)
+
+
+def test_random_bodies_export_watertight(tmp_path):
+    """Random blobby bodies (unions of balls on the lattice) with random actuator groups."""
+    rng = np.random.default_rng(3)
     task = get_task("crawling")
-    robot = task.reference_robot("box")
-    rep = export_design(Design("crawling", robot, task.controller()), tmp_path)
-    body = rep["parts"]["body"]
-    assert body["watertight"]
-    expected = 80.0**3  # the full 0.08 workspace at 1000 mm per unit
-    assert abs(body["volume_mm3"] - expected) / expected < 0.1
+    pts = task.design_points()
+    ws = np.array(task.design_workspace())
+    for k in range(3):
+        centres = rng.uniform(0.25, 0.75, (4, 3)) * ws
+        radii = rng.uniform(0.12, 0.22, 4) * ws.min()
+        d2 = ((pts[:, None] - centres[None]) ** 2).sum(-1)
+        occ = (d2 < radii**2).any(1).astype(float)
+        robot = task.make_robot(occ)
+        d = Design("crawling", robot, task.controller())
+        rep = export_design(d, tmp_path / f"blob{k}", ExportConfig(stl=True, threemf=False))
+        body = rep["parts"]["body"]
+        assert body["watertight"] and body["bodies"] == 1
+        assert abs(rep["volume_check"]["ratio"] - 1) < 0.1
+
+
+def test_bad_input_leaves_nothing_behind(tmp_path):
+    t = get_task("crawling")
+    d = Design("crawling", t.reference_robot("box"), t.controller())
+    d.robot = Robot(np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros((0, 4)),
+                    d.robot.directions)
+    with pytest.raises(ValueError, match="no robot fields"):
+        export_design(d, tmp_path / "x")
+    d = Design("crawling", t.reference_robot("box"), t.controller())
+    d.robot.occupancy[:] = 0.0
+    with pytest.raises(ValueError, match="no active particles"):
+        export_design(d, tmp_path / "x")
+    with pytest.raises(ValueError, match="infill"):
+        export_design(_finger(), tmp_path / "x", ExportConfig(infill="honeycomb"))
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_interrupted_export_keeps_the_previous_folder(tmp_path, monkeypatch):
+    out = tmp_path / "finger"
+    export_design(_finger(), out, ExportConfig(threemf=False))
+    before = sorted(p.name for p in out.iterdir())
+    import dbtool.export.assembly as asm
+
+    def boom(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(asm, "report_markdown", boom)
+    with pytest.raises(KeyboardInterrupt):
+        export_design(_finger(), out, ExportConfig(threemf=False))
+    assert sorted(p.name for p in out.iterdir()) == before
+    assert [p.name for p in tmp_path.iterdir()] == ["finger"]  # no partial folder left
+
+
+def test_design_volume_counts_active_sites():
+    d = _finger()
+    assert design_volume(d, 1000.0) == pytest.approx(d.robot.active().sum() * 2.5**3)

@@ -120,7 +120,7 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
             eps = guided_eps(prior.eps, x, t, conds)
             score = -eps / float((1 - diff.abar[t]).sqrt())
             row = {"t": t, "k": k, "score_rms": rms(score)}
-            move = eta * score
+            drift = score
             if cfg.kappa > 0:
                 ab = float(diff.abar[t])
                 try:
@@ -136,13 +136,13 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
                 else:
                     raw = cfg.kappa * ph.grad_x.reshape(x.shape)
                     p = clip_rms(raw, cfg.renorm)
-                    move = move + eta_r * p
+                    drift = score + (eta_r / eta) * p  # eta_r / eta is exactly 1 above the floor
                     row.update(metric=ph.metric, physics_rms=rms(raw), applied_rms=rms(p),
                                physics_move=eta_r * rms(p))
                     if active and ph.grad_phi is not None:
                         phi = np.clip(phi + cfg.gamma * ph.grad_phi, -1.0, 1.0)
                         row["phi_grad"] = float(np.abs(ph.grad_phi).max())
-            x = x + move + sigma * torch.randn(x.shape, generator=gen)
+            x = x + eta * drift + sigma * torch.randn(x.shape, generator=gen)
             history.append(row)
             if on_step is not None:
                 on_step(row)

@@ -1,46 +1,346 @@
-"""The export stage: a saved Design -> printable parts, an assembly and a report (mm)."""
+"""The export stage (SPEC section 8): a saved Design -> printable parts, an assembly, tendon
+routing and a fabrication report, all in millimetres.
+
+Gripping: the designed finger, its mirror copy (``Manifold.mirror``, so winding stays right) about
+the gripper's mirror plane and the rigid base plate with four mounting holes, placed as in the
+simulated gripper; one tendon per actuator group and finger (:mod:`dbtool.export.tendons`),
+optionally cut as channels. Other tasks: the body and its actuator regions as separate parts.
+"""
 
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import numpy as np
+
+from dbtool.atomic import _umask
 from dbtool.design import Design
-from dbtool.export.mesh import MM_PER_UNIT, occupancy_solid, report, write_mesh
+from dbtool.export.mesh import (
+    MM_PER_UNIT,
+    OccupancyField,
+    Voxels,
+    largest_component,
+    manifold3d,
+    mesh_report,
+    write_stl,
+)
+from dbtool.export.tendons import Tendon, channel_solid, mirror_tendon, route_finger
+from dbtool.export.threemf import write_3mf
 from dbtool.runs import write_json
 from dbtool.sim.tasks import get_task
 from dbtool.sim.tasks.base import SPACING
 from dbtool.sim.tasks.gripping import BASE, FULL
 
+GLUE = 0.01  # mm of overlap that fuses the fingers to the plate in ``assembly``
 
-def build_parts(design: Design, scale: float = MM_PER_UNIT) -> dict:
-    """Manifolds (mm) of the design: ``body`` or, for the gripper, ``finger``, ``finger_mirror``,
-    ``base`` and their boolean union ``assembly``."""
-    import manifold3d as m3
 
+@dataclass
+class ExportConfig:
+    """Settings of ``dbtool export``; lengths in mm."""
+
+    scale_mm: float = MM_PER_UNIT  # mm per simulation unit: a 60 x 72.5 x 42.5 mm finger
+    stl: bool = True
+    threemf: bool = True
+    channels: bool = False  # cut the tendon channels into fingers and base
+    channel_diameter: float = 1.5  # a PTFE tube's bore for a braided line
+    min_wall: float = 1.0  # material kept around a channel
+    mount_hole: float = 3.4  # M3 clearance holes in the base
+    infill: str = "none"  # none | voronoi
+    shell: float = 1.2  # solid skin around the Voronoi foam
+    pitch: float = 0.5  # voxel pitch (mm) of the depth field that places routing points
+
+    @property
+    def radius(self) -> float:
+        return 0.5 * self.channel_diameter
+
+
+@dataclass
+class Assembly:
+    parts: dict  # name -> manifold (mm), printable parts only
+    union: object  # all parts fused (one body for the gripper)
+    tendons: list[Tendon]
+    design_volume_mm3: float  # the largest connected piece of the design (what is meshed)
+    body_volume_mm3: float  # the meshed body before channels and infill
+    timings: dict
+    infill: dict
+
+
+def design_volume(design: Design, scale: float, largest: bool = False) -> float:
+    """The design's solid volume: active lattice sites x spacing^3, in mm^3; ``largest``: of
+    its largest connected piece only (sites touching by a face, edge or corner), the piece the
+    export keeps."""
     robot = design.robot
-    body = occupancy_solid(robot.points, robot.active(), SPACING, scale)
-    if design.task != "gripping":
-        return {"body": body, "assembly": body}
-    plane = FULL[2] / 2 * scale  # the finger lies in z < plane; its mirror in z > plane
-    mirror = body.mirror([0.0, 0.0, 1.0]).translate([0.0, 0.0, 2 * plane])
-    # the plate reaches one particle spacing down so the finger roots fuse with it
-    base = m3.Manifold.cube([FULL[0] * scale, (BASE + SPACING) * scale, FULL[2] * scale])
-    base = base.translate([0.0, (FULL[1] - BASE - SPACING) * scale, 0.0])
-    assembly = m3.Manifold.batch_boolean([body, mirror, base], m3.OpType.Add)
-    return {"finger": body, "finger_mirror": mirror, "base": base, "assembly": assembly}
+    active = robot.active()
+    n = int(active.sum())
+    if largest and n:
+        from scipy.ndimage import label
+
+        idx = np.round(robot.points[active] / SPACING - 0.5).astype(int)
+        idx -= idx.min(0)
+        grid = np.zeros(idx.max(0) + 1, bool)
+        grid[tuple(idx.T)] = True
+        lab, k = label(grid, structure=np.ones((3, 3, 3)))
+        if k > 1:
+            n = int(np.bincount(lab[grid]).max())
+    return float(n) * (SPACING * scale) ** 3
 
 
-def export_design(design: Design, out_dir: Path, formats=("stl",),
-                  scale: float = MM_PER_UNIT) -> dict:
-    """Write every part in each format plus ``report.json``; returns the report."""
+def _fields(design: Design, scale: float, extrude_top: int = 0
+            ) -> tuple[OccupancyField, dict[int, OccupancyField]]:
+    """Fields of the body and of each actuator group's particles. ``extrude_top`` copies the
+    top layer of sites upward so a part trimmed there keeps straight walls (the finger root)."""
+    robot = design.robot
+    points, active = robot.points, robot.active()
+    if not active.any():
+        raise ValueError("the design has no active particles: nothing to export")
+    w = robot.actuators
+    label = np.where(w.max(1) > 0, w.argmax(1), -1) if w.size else np.full(robot.n, -1)
+    if extrude_top:
+        top = np.isclose(points[:, 1], points[:, 1].max())
+        extra = [points[top] + [0.0, k * SPACING, 0.0] for k in range(1, extrude_top + 1)]
+        points = np.vstack([points, *extra])
+        active = np.concatenate([active, np.tile(active[top], extrude_top)])
+        label = np.concatenate([label, np.tile(label[top], extrude_top)])
+    body = OccupancyField.from_sites(points, active, SPACING, scale)
+    # every lattice site takes the group of its nearest active, actuated site, so the surfaces
+    # between regions run on through the body's surface instead of along it (no slivers)
+    owned = active & (label >= 0)
+    regions = {}
+    if owned.any():
+        from scipy.spatial import cKDTree
+
+        _, near = cKDTree(points[owned]).query(points)
+        filled = label[owned][near]
+        regions = {int(g): OccupancyField.from_sites(points, filled == g, SPACING, scale,
+                                                     frame=points, edge_pad=True)
+                   for g in np.unique(filled)}
+    return body, regions
+
+
+def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
+    m3 = manifold3d()
+    s = cfg.scale_mm
+    t0 = time.perf_counter()
+    body, regions = _fields(design, s, extrude_top=3)
+    finger = body.solid()
+    root = (FULL[1] - BASE) * s  # the base's lower face; the finger hangs below it
+    finger = finger.trim_by_plane([0.0, -1.0, 0.0], -root)  # keep y <= root
+    finger = largest_component(finger)
+    plane = FULL[2] / 2 * s  # the finger lies in z < plane, its mirror in z > plane
+    mirror = finger.mirror([0.0, 0.0, 1.0]).translate([0.0, 0.0, 2 * plane])
+    base = m3.Manifold.cube([FULL[0] * s, BASE * s, FULL[2] * s]).translate([0.0, root, 0.0])
+    t_mesh = time.perf_counter()
+    vox = Voxels.of(finger, cfg.pitch)
+    tendons = route_finger(finger, regions, "finger", FULL[1] * s, root, cfg.radius, cfg.min_wall,
+                           {0: -1.0, 1: +1.0}, cfg.pitch, voxels=vox)
+    tendons += [mirror_tendon(t, plane, "finger_mirror") for t in tendons]
+    t_route = time.perf_counter()
+    body_volume = finger.volume()
+    info: dict = {}
+    if cfg.infill == "voronoi":
+        from dbtool.export.infill import InfillConfig, voronoi_infill
+
+        foam, info = voronoi_infill(finger, InfillConfig(shell=cfg.shell))
+        if cfg.channels:  # a solid sleeve keeps each channel a closed tube through the foam
+            sleeves = [channel_solid(t, cfg.radius + cfg.min_wall) for t in tendons
+                       if t.finger == "finger"]
+            foam = foam + (m3.Manifold.batch_boolean(sleeves, m3.OpType.Add) ^ finger)
+        finger = foam
+        mirror = finger.mirror([0.0, 0.0, 1.0]).translate([0.0, 0.0, 2 * plane])
+    t_infill = time.perf_counter()
+    # four mounting holes through the plate, 8 mm in from its corners
+    r = 0.5 * cfg.mount_hole
+    holes = []
+    for x in (8.0, FULL[0] * s - 8.0):
+        for z in (8.0, FULL[2] * s - 8.0):
+            hole = m3.Manifold.cylinder(BASE * s + 2.0, r, r, 24)
+            holes.append(hole.rotate([-90.0, 0.0, 0.0]).translate([x, root - 1.0, z]))
+    # the fingers only touch the plate's lower face; in the fused assembly the plate reaches
+    # 0.01 mm lower so fingers and plate overlap and join into one body
+    glue = m3.Manifold.cube([FULL[0] * s, 2 * GLUE, FULL[2] * s]).translate([0.0, root - GLUE, 0.0])
+    cut = m3.Manifold.batch_boolean(holes, m3.OpType.Add)
+    if cfg.channels:
+        cuts = {n: m3.Manifold.batch_boolean([channel_solid(t, cfg.radius) for t in tendons
+                                             if t.finger == n], m3.OpType.Add)
+                for n in ("finger", "finger_mirror")}
+        finger, mirror = finger - cuts["finger"], mirror - cuts["finger_mirror"]
+        cut = cut + cuts["finger"] + cuts["finger_mirror"]
+    base, glue = base - cut, glue - cut
+    t_channels = time.perf_counter()
+    parts = {"finger": finger, "finger_mirror": mirror, "base": base}
+    union = m3.Manifold.batch_boolean([*parts.values(), glue], m3.OpType.Add)
+    timings = {"mesh_s": t_mesh - t0, "routing_s": t_route - t_mesh,
+               "infill_s": t_infill - t_route, "channels_s": t_channels - t_infill,
+               "assembly_s": time.perf_counter() - t_channels}
+    return Assembly(parts, union, tendons, design_volume(design, s, largest=True),
+                    body_volume, timings, info)
+
+
+def build_body(design: Design, cfg: ExportConfig) -> Assembly:
+    """Any other task: the body, and the actuator regions as parts inside it."""
+    s = cfg.scale_mm
+    t0 = time.perf_counter()
+    body_field, regions = _fields(design, s)
+    body = body_field.solid()
+    parts: dict = {"body": body}
+    for g, f in sorted(regions.items()):
+        others = [o for k, o in regions.items() if k != g]
+        if others:  # the part of the body where group g outweighs every other group
+            stack = np.max([o.grid for o in others], axis=0)
+            rival = OccupancyField(stack, f.origin, f.spacing, f.scale)
+            region = f.solid(other=rival, keep_largest=False) ^ body
+        else:
+            region = body
+        pieces = sorted(region.decompose(), key=lambda m: -m.volume())
+        pieces = [p for p in pieces if p.volume() > 0.005 * body.volume()]
+        for i, p in enumerate(pieces):
+            parts[f"actuator_{g}" + (f"_{i}" if len(pieces) > 1 else "")] = p
+    t1 = time.perf_counter()
+    info: dict = {}
+    if cfg.infill == "voronoi":
+        from dbtool.export.infill import InfillConfig, voronoi_infill
+
+        parts["body"], info = voronoi_infill(body, InfillConfig(shell=cfg.shell))
+    return Assembly(parts, parts["body"], [], design_volume(design, s, largest=True), body.volume(),
+                    {"mesh_s": t1 - t0, "infill_s": time.perf_counter() - t1}, info)
+
+
+def build(design: Design, cfg: ExportConfig | None = None) -> Assembly:
+    cfg = cfg or ExportConfig()
+    if cfg.infill not in ("none", "voronoi"):
+        raise ValueError(f"unknown infill {cfg.infill!r}: choose none or voronoi")
     get_task(design.task)  # fail early on an unknown task
+    if design.robot.n == 0:
+        raise ValueError("the design has no robot fields (points, occupancy, actuators)")
+    if design.task == "gripping":
+        return build_gripper(design, cfg)
+    return build_body(design, cfg)
+
+
+def export_design(design: Design, out_dir: Path, cfg: ExportConfig | None = None,
+                  name: str | None = None) -> dict:
+    """Write the parts (STL and/or 3MF), ``tendons.json``, ``tendons.png``, ``report.json`` and
+    ``report.md`` into ``out_dir``; returns the report.
+
+    Everything is written into a hidden sibling folder first and renamed into place at the end,
+    so an interrupted export never leaves a folder that looks complete.
+    """
+    cfg = cfg or ExportConfig()
     out_dir = Path(out_dir)
-    parts = build_parts(design, scale)
-    files = []
-    for name, solid in parts.items():
-        for fmt in formats:
-            files.append(str(write_mesh(solid, out_dir / f"{design.task}_{name}.{fmt}")))
-    rep = {"task": design.task, "units": "mm", "mm_per_sim_unit": scale,
-           "files": files, "parts": {name: report(solid) for name, solid in parts.items()}}
-    write_json(out_dir / "report.json", rep)
+    name = name or out_dir.name
+    asm = build(design, cfg)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    if not os.access(out_dir.parent, os.W_OK):
+        raise PermissionError(f"cannot write to {out_dir.parent}")
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
+    try:
+        os.chmod(tmp, 0o777 & ~_umask())
+        files = []
+        t0 = time.perf_counter()
+        for part, solid in asm.parts.items():
+            if cfg.stl:
+                files.append(write_stl(solid, tmp / f"{part}.stl").name)
+        if cfg.stl and design.task == "gripping":
+            files.append(write_stl(asm.union, tmp / "assembly.stl").name)
+        if cfg.threemf:
+            objs = {k: v for k, v in asm.parts.items() if not (k == "body" and len(asm.parts) > 1)}
+            files.append(write_3mf(objs, tmp / "assembly.3mf").name)
+        t_write = time.perf_counter() - t0
+        rep = report(design, asm, cfg, name, files)
+        rep["timings_s"]["write_s"] = round(t_write, 3)
+        write_json(tmp / "report.json", rep)
+        (tmp / "report.md").write_text(report_markdown(rep))
+        if design.task == "gripping":
+            tj = {"units": "mm", "frame": "gripper workspace, y up, base on top",
+                  "channel_diameter_mm": cfg.channel_diameter, "min_wall_mm": cfg.min_wall,
+                  "channels_cut": cfg.channels, "tendons": [t.as_json() for t in asm.tendons]}
+            write_json(tmp / "tendons.json", tj)
+            from dbtool.export.drawing import draw_tendons
+
+            draw_tendons(asm, tmp / "tendons.png", title=name)
+        if out_dir.exists():
+            old = out_dir.parent / f".{out_dir.name}.old-{os.getpid()}"
+            out_dir.rename(old)
+            tmp.rename(out_dir)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            tmp.rename(out_dir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
     return rep
+
+
+def report(design: Design, asm: Assembly, cfg: ExportConfig, name: str, files: list) -> dict:
+    """``report.json``: per part the checks of :func:`mesh_report`, the volume against the
+    design's solid volume x scale^3, and the tendons' clearances (SPEC 8)."""
+    parts = {k: mesh_report(v) for k, v in asm.parts.items()}
+    if design.task == "gripping":
+        parts["assembly"] = mesh_report(asm.union, thickness=False)
+    main = "finger" if design.task == "gripping" else "body"
+    rep = {
+        "design": name, "task": design.task, "units": "mm", "mm_per_sim_unit": cfg.scale_mm,
+        "config": asdict(cfg), "files": files, "parts": parts,
+        "volume_check": {
+            "part": main, "design_solid_mm3": asm.design_volume_mm3,
+            "mesh_mm3": asm.body_volume_mm3,
+            "ratio": asm.body_volume_mm3 / asm.design_volume_mm3,
+            "design_total_mm3": design_volume(design, cfg.scale_mm),  # loose pieces included
+        },
+        "timings_s": {k: round(v, 3) for k, v in asm.timings.items()},
+        "metrics": design.metrics,
+    }
+    if asm.tendons:
+        rep["tendons"] = {
+            "count": len(asm.tendons), "points_per_tendon": len(asm.tendons[0].points),
+            "channel_radius_mm": cfg.radius, "min_wall_mm": cfg.min_wall,
+            "min_point_depth_mm": min(min(t.depth_mm) for t in asm.tendons),
+            "channel_clearance_mm": min(t.clearance_mm for t in asm.tendons),
+            "all_points_clear": all(t.ok for t in asm.tendons),
+        }
+    if asm.infill:
+        rep["infill"] = asm.infill
+    return rep
+
+
+def report_markdown(rep: dict) -> str:
+    """A short human-readable ``report.md``."""
+    lines = [f"# Fabrication report: {rep['design']}", "",
+             f"Task {rep['task']}; units mm ({rep['mm_per_sim_unit']:g} mm per simulation unit).",
+             "", "| part | watertight | volume | bodies | genus | volume (mm³) | "
+                 "bounding box (mm) | thinnest wall (mm) |",
+             "| --- | --- | --- | ---: | ---: | ---: | --- | ---: |"]
+    for k, p in rep["parts"].items():
+        wall = f"{p['min_wall_mm']:.2f}" if "min_wall_mm" in p else "–"
+        box = " × ".join(f"{v:.1f}" for v in p["bbox_mm"])
+        lines.append(f"| {k} | {p['watertight']} | {p['is_volume']} | {p['bodies']} | "
+                     f"{p['genus']} | {p['volume_mm3']:.0f} | {box} | {wall} |")
+    v = rep["volume_check"]
+    lines += ["", f"Meshed {v['part']} {v['mesh_mm3']:.0f} mm³ against the design's solid "
+                  f"{v['design_solid_mm3']:.0f} mm³ (ratio {v['ratio']:.3f}). The thinnest wall is "
+                  f"the shortest ray from a face, along its inward normal, through the part."]
+    dropped = v["design_total_mm3"] - v["design_solid_mm3"]
+    if dropped > 0:
+        lines += ["", f"**Loose pieces dropped:** {dropped:.0f} mm³ of the design "
+                      f"({dropped / v['design_total_mm3']:.1%}) is not connected to its largest "
+                      "piece and was left out."]
+    if "tendons" in rep:
+        t = rep["tendons"]
+        lines += ["", f"Tendons: {t['count']} ({t['points_per_tendon']} routing points each), "
+                      f"channel radius {t['channel_radius_mm']} mm, routing points at least "
+                      f"{t['min_point_depth_mm']:.2f} mm deep (needed "
+                      f"{t['channel_radius_mm'] + t['min_wall_mm']:.2f}); thinnest wall around "
+                      f"a channel along the paths {t['channel_clearance_mm']:.2f} mm; all points "
+                      f"clear: {t['all_points_clear']}. Channels cut: "
+                      f"{rep['config']['channels']}."]
+    if "infill" in rep:
+        i = rep["infill"]
+        lines += ["", f"Voronoi infill: relative density {i['relative_density']:.3f} "
+                      f"(seed spacing {i['spacing_mm']} mm, beams {i['beam_mm']} mm, shell "
+                      f"{i['shell_mm']} mm), built in {i['seconds']:.1f} s."]
+    return "\n".join(lines) + "\n"
