@@ -1,5 +1,6 @@
 """The command line, run as a user would (a subprocess of the installed entry point)."""
 
+import os
 import subprocess
 import sys
 
@@ -74,8 +75,13 @@ def test_design_then_export(tmp_path):
     assert d.task == "gripping" and d.controller.shape == (4, 2)
     out = _run("export", "--stl", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
-    assert (tmp_path / "exports" / "gripping" / "gripping_assembly.stl").stat().st_size > 0
-    assert "watertight=True" in out.stdout
+    exp = tmp_path / "exports" / found[0].parent.name
+    for name in ("finger", "finger_mirror", "base", "assembly"):
+        assert (exp / f"{name}.stl").stat().st_size > 0
+    assert not (exp / "assembly.3mf").exists()  # --stl alone
+    assert {"tendons.json", "tendons.png", "report.json", "report.md"} <= {
+        p.name for p in exp.iterdir()}
+    assert "watertight=True bodies=1" in out.stdout
 
 
 def test_particle_baseline_still_designs(tmp_path):
@@ -88,3 +94,30 @@ def test_particle_baseline_still_designs(tmp_path):
 def test_export_without_a_design_fails_cleanly(tmp_path):
     out = _run("export", "--stl", cwd=tmp_path)
     assert out.returncode != 0 and "no design found" in out.stderr
+
+
+def test_export_bad_input(tmp_path):
+    """Not a run directory, a design without robot fields, an unwritable output folder."""
+    (tmp_path / "notarun").mkdir()
+    out = _run("export", str(tmp_path / "notarun"))
+    assert out.returncode != 0 and "holds no design.npz" in out.stderr
+    np.savez(tmp_path / "cloud.npz", points=np.zeros((10, 3)))
+    out = _run("export", "--design", str(tmp_path / "cloud.npz"))
+    assert out.returncode != 0 and "lacks header" in out.stderr
+    task = get_task("crawling")
+    Design("crawling", task.reference_robot("box"), task.controller()).save(tmp_path / "d.npz")
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        out = _run("export", "--design", str(tmp_path / "d.npz"), "--out", str(locked))
+        if os.geteuid() != 0:  # root writes anywhere
+            assert out.returncode != 0 and "cannot write" in out.stderr, out.stderr
+            assert list(locked.iterdir()) == []
+    finally:
+        locked.chmod(0o700)
+    (tmp_path / "afile").write_text("x")
+    out = _run("export", "--design", str(tmp_path / "d.npz"), "--out", str(tmp_path / "afile"))
+    assert out.returncode != 0 and out.stderr.startswith("error:"), out.stderr
+    assert "Traceback" not in out.stderr
+    assert (tmp_path / "afile").read_text() == "x"

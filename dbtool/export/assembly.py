@@ -13,7 +13,7 @@ import os
 import shutil
 import tempfile
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +33,7 @@ from dbtool.export.tendons import Tendon, channel_solid, mirror_tendon, route_fi
 from dbtool.export.threemf import write_3mf
 from dbtool.runs import write_json
 from dbtool.sim.tasks import get_task
-from dbtool.sim.tasks.base import SPACING
+from dbtool.sim.tasks.base import DX, SPACING
 from dbtool.sim.tasks.gripping import BASE, FULL
 
 GLUE = 0.01  # mm of overlap that fuses the fingers to the plate in ``assembly``
@@ -68,6 +68,7 @@ class Assembly:
     body_volume_mm3: float  # the meshed body before channels and infill
     timings: dict
     infill: dict
+    notes: dict = field(default_factory=dict)
 
 
 def design_volume(design: Design, scale: float, largest: bool = False) -> float:
@@ -91,21 +92,32 @@ def design_volume(design: Design, scale: float, largest: bool = False) -> float:
 
 
 def _fields(design: Design, scale: float, extrude_top: int = 0
-            ) -> tuple[OccupancyField, dict[int, OccupancyField]]:
-    """Fields of the body and of each actuator group's particles. ``extrude_top`` copies the
-    top layer of sites upward so a part trimmed there keeps straight walls (the finger root)."""
+            ) -> tuple[OccupancyField, dict[int, OccupancyField], float]:
+    """Fields of the body and of each actuator group's particles, and the root gap (mm).
+
+    ``extrude_top``: the topmost layer of active sites is continued upward to the top of the
+    design lattice and ``extrude_top`` layers beyond, so a finger trimmed at its root keeps
+    straight walls and meets the base. The simulator's grid (cells of two sites) joins a finger
+    to the base across a gap below one cell, so such a gap is printed solid; its size is
+    returned (0 when the finger reaches the lattice's top).
+    """
     robot = design.robot
     points, active = robot.points, robot.active()
     if not active.any():
         raise ValueError("the design has no active particles: nothing to export")
     w = robot.actuators
     label = np.where(w.max(1) > 0, w.argmax(1), -1) if w.size else np.full(robot.n, -1)
+    gap = 0.0
     if extrude_top:
-        top = np.isclose(points[:, 1], points[:, 1].max())
-        extra = [points[top] + [0.0, k * SPACING, 0.0] for k in range(1, extrude_top + 1)]
+        y = points[:, 1]
+        top_active = y[active].max()
+        gap = float(y.max() - top_active) * scale
+        layer = active & np.isclose(y, top_active)
+        n_up = int(round((y.max() - top_active) / SPACING)) + extrude_top
+        extra = [points[layer] + [0.0, k * SPACING, 0.0] for k in range(1, n_up + 1)]
         points = np.vstack([points, *extra])
-        active = np.concatenate([active, np.tile(active[top], extrude_top)])
-        label = np.concatenate([label, np.tile(label[top], extrude_top)])
+        active = np.concatenate([active, np.ones(n_up * int(layer.sum()), bool)])
+        label = np.concatenate([label, np.tile(label[layer], n_up)])
     body = OccupancyField.from_sites(points, active, SPACING, scale)
     # every lattice site takes the group of its nearest active, actuated site, so the surfaces
     # between regions run on through the body's surface instead of along it (no slivers)
@@ -119,16 +131,39 @@ def _fields(design: Design, scale: float, extrude_top: int = 0
         regions = {int(g): OccupancyField.from_sites(points, filled == g, SPACING, scale,
                                                      frame=points, edge_pad=True)
                    for g in np.unique(filled)}
-    return body, regions
+    return body, regions, gap
+
+
+def _root_pillars(design: Design, scale: float, root: float):
+    """Square pillars (one lattice cell wide) from every active site within one simulator grid
+    cell (``DX``, two sites) of the base up into it: the sites the simulation's grid couples to
+    the glued base. Smoothing would thin a narrow root away; these keep it as designed."""
+    m3 = manifold3d()
+    r = design.robot
+    a = r.active()
+    y = r.points[:, 1]
+    sel = a & (y >= y.max() - (DX / SPACING - 0.5) * SPACING)
+    if not sel.any():
+        return None
+    w = 1.02 * SPACING * scale  # a hair wider than a cell so neighbours overlap
+    boxes = []
+    for x, yy, z in r.points[sel] * scale:
+        bottom = yy - SPACING * scale
+        box = m3.Manifold.cube([w, root + 1.0 - bottom, w])
+        boxes.append(box.translate([x - w / 2, bottom, z - w / 2]))
+    return m3.Manifold.batch_boolean(boxes, m3.OpType.Add)
 
 
 def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
     m3 = manifold3d()
     s = cfg.scale_mm
     t0 = time.perf_counter()
-    body, regions = _fields(design, s, extrude_top=3)
-    finger = body.solid()
+    body, regions, gap = _fields(design, s, extrude_top=3)
+    finger = body.solid(keep_largest=False)
     root = (FULL[1] - BASE) * s  # the base's lower face; the finger hangs below it
+    pillars = _root_pillars(design, s, root)
+    if pillars is not None:
+        finger = finger + pillars
     finger = finger.trim_by_plane([0.0, -1.0, 0.0], -root)  # keep y <= root
     finger = largest_component(finger)
     plane = FULL[2] / 2 * s  # the finger lies in z < plane, its mirror in z > plane
@@ -140,14 +175,17 @@ def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
                            {0: -1.0, 1: +1.0}, cfg.pitch, voxels=vox)
     tendons += [mirror_tendon(t, plane, "finger_mirror") for t in tendons]
     t_route = time.perf_counter()
-    body_volume = finger.volume()
+    # the volume check compares the part of the finger the design holds (below its top sites)
+    design_top = (design.robot.points[design.robot.active(), 1].max() + SPACING / 2) * s
+    body_volume = finger.trim_by_plane([0.0, -1.0, 0.0], -design_top).volume()
+    bridge = finger.volume() - body_volume
     info: dict = {}
     if cfg.infill == "voronoi":
         from dbtool.export.infill import InfillConfig, voronoi_infill
 
         foam, info = voronoi_infill(finger, InfillConfig(shell=cfg.shell))
         if cfg.channels:  # a solid sleeve keeps each channel a closed tube through the foam
-            sleeves = [channel_solid(t, cfg.radius + cfg.min_wall) for t in tendons
+            sleeves = [channel_solid(t, cfg.radius + cfg.min_wall, root) for t in tendons
                        if t.finger == "finger"]
             foam = foam + (m3.Manifold.batch_boolean(sleeves, m3.OpType.Add) ^ finger)
         finger = foam
@@ -164,12 +202,12 @@ def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
     # 0.01 mm lower so fingers and plate overlap and join into one body
     glue = m3.Manifold.cube([FULL[0] * s, 2 * GLUE, FULL[2] * s]).translate([0.0, root - GLUE, 0.0])
     cut = m3.Manifold.batch_boolean(holes, m3.OpType.Add)
-    if cfg.channels:
-        cuts = {n: m3.Manifold.batch_boolean([channel_solid(t, cfg.radius) for t in tendons
-                                             if t.finger == n], m3.OpType.Add)
-                for n in ("finger", "finger_mirror")}
-        finger, mirror = finger - cuts["finger"], mirror - cuts["finger_mirror"]
-        cut = cut + cuts["finger"] + cuts["finger_mirror"]
+    if cfg.channels:  # cut the designed finger; its mirror copy stays its exact reflection
+        tubes = m3.Manifold.batch_boolean([channel_solid(t, cfg.radius, root) for t in tendons
+                                           if t.finger == "finger"], m3.OpType.Add)
+        finger = finger - tubes
+        mirror = finger.mirror([0.0, 0.0, 1.0]).translate([0.0, 0.0, 2 * plane])
+        cut = cut + tubes + tubes.mirror([0.0, 0.0, 1.0]).translate([0.0, 0.0, 2 * plane])
     base, glue = base - cut, glue - cut
     t_channels = time.perf_counter()
     parts = {"finger": finger, "finger_mirror": mirror, "base": base}
@@ -177,15 +215,16 @@ def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
     timings = {"mesh_s": t_mesh - t0, "routing_s": t_route - t_mesh,
                "infill_s": t_infill - t_route, "channels_s": t_channels - t_infill,
                "assembly_s": time.perf_counter() - t_channels}
+    notes = {"root_gap_mm": round(gap, 3), "root_bridge_mm3": round(bridge, 1)}
     return Assembly(parts, union, tendons, design_volume(design, s, largest=True),
-                    body_volume, timings, info)
+                    body_volume, timings, info, notes)
 
 
 def build_body(design: Design, cfg: ExportConfig) -> Assembly:
     """Any other task: the body, and the actuator regions as parts inside it."""
     s = cfg.scale_mm
     t0 = time.perf_counter()
-    body_field, regions = _fields(design, s)
+    body_field, regions, _ = _fields(design, s)
     body = body_field.solid()
     parts: dict = {"body": body}
     for g, f in sorted(regions.items()):
@@ -293,6 +332,7 @@ def report(design: Design, asm: Assembly, cfg: ExportConfig, name: str, files: l
             "design_total_mm3": design_volume(design, cfg.scale_mm),  # loose pieces included
         },
         "timings_s": {k: round(v, 3) for k, v in asm.timings.items()},
+        **asm.notes,
         "metrics": design.metrics,
     }
     if asm.tendons:
@@ -324,6 +364,10 @@ def report_markdown(rep: dict) -> str:
     lines += ["", f"Meshed {v['part']} {v['mesh_mm3']:.0f} mm³ against the design's solid "
                   f"{v['design_solid_mm3']:.0f} mm³ (ratio {v['ratio']:.3f}). The thinnest wall is "
                   f"the shortest ray from a face, along its inward normal, through the part."]
+    if rep.get("root_gap_mm", 0) > 0:
+        lines += ["", f"The design's top sites stop {rep['root_gap_mm']:.2f} mm below the base "
+                      "(the simulator's grid joins them across it); the export fills that gap "
+                      f"with {rep['root_bridge_mm3']:.0f} mm³ so the finger meets the base."]
     dropped = v["design_total_mm3"] - v["design_solid_mm3"]
     if dropped > 0:
         lines += ["", f"**Loose pieces dropped:** {dropped:.0f} mm³ of the design "
