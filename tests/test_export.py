@@ -225,3 +225,20 @@ def test_reference_export_is_valid_and_current(tmp_path):
     for name, part in rep["parts"].items():
         assert again["parts"][name]["volume_mm3"] == pytest.approx(part["volume_mm3"], rel=1e-6)
     assert json.loads((tmp_path / "again" / "tendons.json").read_text()) == tj
+
+
+def test_voronoi_infill_through_export(tmp_path):
+    """--infill voronoi: the body stays one watertight volume and reports its density."""
+    task = get_task("crawling")
+    pts = task.design_points()
+    centre = np.array(task.design_workspace()) / 2
+    occ = (np.linalg.norm(pts - centre, axis=1) < 0.009).astype(float)  # an 18 mm ball
+    d = Design("crawling", task.make_robot(occ), task.controller())
+    rep = export_design(d, tmp_path / "foam", ExportConfig(infill="voronoi", threemf=False))
+    body = rep["parts"]["body"]
+    assert body["watertight"] and body["is_volume"] and body["bodies"] == 1
+    i = rep["infill"]
+    assert 0.2 < i["relative_density"] < 0.9 and i["spacing_mm"] == 2.5 and i["beam_mm"] == 0.4
+    assert "Voronoi infill: relative density" in (tmp_path / "foam" / "report.md").read_text()
+    assert body["volume_mm3"] == pytest.approx(i["relative_density"] * rep["volume_check"][
+        "mesh_mm3"], rel=0.02)
