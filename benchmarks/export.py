@@ -110,11 +110,12 @@ def _check_export(folder: Path, rep: dict) -> dict:
     want = sum(rep["parts"][k]["volume_mm3"] for k in names3mf)
     v = rep["volume_check"]
     return {"task": rep["task"], "parts": len(rep["parts"]), "ok": bool(ok), "bad": bad,
-            "volume_ratio": v["ratio"], "volume_ok": abs(v["ratio"] - 1) <= 0.1,
-            "3mf_roundtrip": abs(vol3mf - want) <= 1e-4 * want,
-            "dropped_mm3": v["design_total_mm3"] - v["design_solid_mm3"],
+            "volume_ratio": float(v["ratio"]), "volume_ok": bool(abs(v["ratio"] - 1) <= 0.1),
+            "3mf_roundtrip": bool(abs(vol3mf - want) <= 1e-4 * want),
+            "dropped_mm3": float(v["design_total_mm3"] - v["design_solid_mm3"]),
             "tendon_clearance_mm": rep.get("tendons", {}).get("channel_clearance_mm"),
-            "min_wall_mm": min(p.get("min_wall_mm", np.inf) for p in rep["parts"].values())}
+            "min_wall_mm": float(min(p.get("min_wall_mm", np.inf)
+                                     for p in rep["parts"].values()))}
 
 
 def _random_designs(n: int, seed: int):
@@ -147,7 +148,10 @@ def validate(paths: list[Path], n_random: int, seed: int, channels: bool) -> dic
             folder = Path(tmp) / name
             rep = export_design(d, folder, ExportConfig(channels=channels and
                                                         d.task == "gripping"))
-            rows[name] = _check_export(folder, rep) | {"seconds": time.perf_counter() - t0}
+            rows[name] = _check_export(folder, rep) | {"seconds": time.perf_counter() - t0,
+                                                       "min_walls": {k: p.get("min_wall_mm")
+                                                                     for k, p in
+                                                                     rep["parts"].items()}}
             r = rows[name]
             print(f"{name}: ok={r['ok']} volume ratio {r['volume_ratio']:.3f} "
                   f"3mf={r['3mf_roundtrip']} ({r['seconds']:.0f} s)", flush=True)
