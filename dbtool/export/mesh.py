@@ -98,7 +98,9 @@ class OccupancyField:
         u = np.stack(np.meshgrid(*axes, indexing="ij"), 0).reshape(3, -1)
         # the level sits a hair below 0.5: a sample exactly on the surface (the smoothed
         # indicator is 0.5 halfway between full and empty sites) makes degenerate slivers
-        values = (map_coordinates(g, u, order=1, mode="constant") - LEVEL).reshape(n).tolist()
+        # (between two regions, a tie belongs to neither, for the same reason)
+        level = LEVEL if other is None else 1.0 - LEVEL
+        values = (map_coordinates(g, u, order=1, mode="constant") - level).reshape(n).tolist()
         s0, s1, s2 = (start - 0.5 * h).tolist()  # int() of the shifted index rounds it
         ih = 1.0 / h
 
