@@ -224,7 +224,11 @@ def test_reference_export_is_valid_and_current(tmp_path):
         k: v for k, v in rep["config"].items()}))
     for name, part in rep["parts"].items():
         assert again["parts"][name]["volume_mm3"] == pytest.approx(part["volume_mm3"], rel=1e-6)
-    assert json.loads((tmp_path / "again" / "tendons.json").read_text()) == tj
+    fresh = json.loads((tmp_path / "again" / "tendons.json").read_text())["tendons"]
+    for a, b in zip(fresh, tj["tendons"], strict=True):
+        assert (a["name"], a["role"]) == (b["name"], b["role"])
+        assert np.allclose(a["points"], b["points"], atol=1e-3)
+        assert np.allclose(a["exit"], b["exit"], atol=1e-3)
 
 
 def test_voronoi_infill_through_export(tmp_path):
