@@ -41,6 +41,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dbtool.export.mesh import manifold3d
+
 _EPS = 1e-3  # mm: pieces closer than this are treated as touching (united, never composed)
 _JITTER = 0.1  # seed displacement, fraction of the body-centred cubic cell (each axis, +-)
 
@@ -57,12 +59,7 @@ class InfillConfig:
     drain: float = 2.0  # mm diameter of a resin drain hole through the skin (0: sealed skin)
 
 
-def _m3():
-    try:
-        import manifold3d as m3
-    except ImportError as exc:  # pragma: no cover
-        raise ImportError("infill needs manifold3d: pip install manifold3d") from exc
-    return m3
+_m3 = manifold3d  # one import guard for the export package
 
 
 # --------------------------------------------------------------------------- distance field
