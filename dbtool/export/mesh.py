@@ -118,14 +118,6 @@ def largest_component(solid):
     return max(parts, key=lambda m: m.volume()) if len(parts) > 1 else solid
 
 
-def occupancy_solid(points: np.ndarray, active: np.ndarray, spacing: float,
-                    scale: float = MM_PER_UNIT, smooth: float = SMOOTH):
-    """Mesh the active particles of a lattice (``spacing`` apart) as one manifold (mm)."""
-    if not np.any(active):
-        raise ValueError("the body is empty: nothing to export")
-    return OccupancyField.from_sites(points, active, spacing, scale, smooth).solid()
-
-
 def to_trimesh(manifold):
     import trimesh
 
