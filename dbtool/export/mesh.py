@@ -69,11 +69,6 @@ class OccupancyField:
         u = (np.atleast_2d(p_mm) / self.scale - self.origin) / self.spacing
         return map_coordinates(self.grid, u.T, order=1, mode="constant")
 
-    def bounds_mm(self) -> tuple[np.ndarray, np.ndarray]:
-        lo = (self.origin - 0.5 * self.spacing) * self.scale
-        hi = lo + np.array(self.grid.shape) * self.spacing * self.scale
-        return lo, hi
-
     def solid(self, other: OccupancyField | None = None, keep_largest: bool = True):
         """Manifold (mm) of ``value > 0.5`` or, with ``other``, of ``value > other``."""
         from scipy.ndimage import map_coordinates
