@@ -119,9 +119,11 @@ def test_channels_keep_one_body_and_the_wall_around_them(gripper):
     f = rep["parts"]["finger"]
     assert f["bodies"] == 1 and f["watertight"]
     assert f["volume_mm3"] < plain.parts["finger"].volume()  # material was cut
-    # the ray-cast wall check sees the channel walls: about min_wall, not less than it - 0.1
-    assert 0.9 <= f["min_wall_mm"] <= 1.5
-    assert np.isinf(wall_thickness(plain.parts["finger"])).mean() > 0.5
+    # the ray-cast wall check sees the channel walls: at least min_wall (- 0.1 for the
+    # polygonal tube), and far thinner than the solid finger's thinnest wall
+    plain_walls = wall_thickness(plain.parts["finger"])
+    assert np.isinf(plain_walls).mean() > 0.5
+    assert 0.9 <= f["min_wall_mm"] <= 2.0 < np.min(plain_walls)
 
 
 @pytest.mark.parametrize("task", sorted(set(TASKS) - {"gripping"}))
@@ -246,3 +248,27 @@ def test_voronoi_infill_through_export(tmp_path):
     assert "Voronoi infill: relative density" in (tmp_path / "foam" / "report.md").read_text()
     assert body["volume_mm3"] == pytest.approx(i["relative_density"] * rep["volume_check"][
         "mesh_mm3"], rel=0.02)
+
+
+@pytest.mark.parametrize("smooth, lo, hi", [(0.35, 0.90, 1.0), (0.6, 0.45, 0.65)])
+def test_a_one_site_plate_keeps_its_volume_at_the_default_smoothing(smooth, lo, hi):
+    """Why SMOOTH is 0.35: a plate one site thick (24 x 24 sites) keeps 93% of its volume;
+    at 0.6 it keeps about half (docs/export.md)."""
+    from dbtool.export.mesh import OccupancyField
+
+    sp = 0.0025
+    g = np.stack(np.meshgrid(np.arange(24), [0], np.arange(24), indexing="ij"), -1).reshape(-1, 3)
+    field = OccupancyField.from_sites((g + 0.5) * sp, np.ones(len(g), bool), sp, smooth=smooth)
+    kept = field.solid().volume() / (len(g) * (sp * 1000) ** 3)
+    assert lo < kept < hi, kept
+
+
+def test_the_report_sees_a_part_as_an_stl_reader_does():
+    """Two cubes touching along an edge are a valid manifold (distinct vertices at the same
+    place) but not a watertight STL once a reader welds the vertices: the report says so."""
+    from dbtool.export.mesh import mesh_report
+
+    cube = m3.Manifold.cube([10.0, 10.0, 10.0])
+    rep = mesh_report(cube + cube.translate([10.0, 10.0, 0.0]), thickness=False)
+    assert rep["manifold_status"] == "NoError" and not rep["watertight"]
+    assert mesh_report(cube, thickness=False)["watertight"]

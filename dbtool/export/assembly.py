@@ -24,6 +24,7 @@ from dbtool.export.mesh import (
     MM_PER_UNIT,
     OccupancyField,
     Voxels,
+    finish,
     largest_component,
     manifold3d,
     mesh_report,
@@ -36,7 +37,8 @@ from dbtool.sim.tasks import get_task
 from dbtool.sim.tasks.base import DX, SPACING
 from dbtool.sim.tasks.gripping import BASE, FULL
 
-GLUE = 0.01  # mm of overlap that fuses the fingers to the plate in ``assembly``
+INSET = 0.2  # mm between a finger and the sides of the workspace (and base)
+GLUE = 0.05  # mm of overlap that fuses the fingers to the plate in ``assembly``
 
 
 @dataclass
@@ -134,24 +136,39 @@ def _fields(design: Design, scale: float, extrude_top: int = 0
     return body, regions, gap
 
 
-def _root_pillars(design: Design, scale: float, root: float):
+def _root_pillars(design: Design, scale: float, root: float) -> np.ndarray | None:
     """Square pillars (one lattice cell wide) from every active site within one simulator grid
     cell (``DX``, two sites) of the base up into it: the sites the simulation's grid couples to
-    the glued base. Smoothing would thin a narrow root away; these keep it as designed."""
-    m3 = manifold3d()
+    the glued base. Smoothing would thin a narrow root away; these keep it as designed.
+    Returns their (k, 2, 3) box corners in mm (united with the finger's field)."""
     r = design.robot
     a = r.active()
     y = r.points[:, 1]
     sel = a & (y >= y.max() - (DX / SPACING - 0.5) * SPACING)
     if not sel.any():
         return None
-    w = 1.02 * SPACING * scale  # a hair wider than a cell so neighbours overlap
-    boxes = []
-    for x, yy, z in r.points[sel] * scale:
-        bottom = yy - SPACING * scale
-        box = m3.Manifold.cube([w, root + 1.0 - bottom, w])
-        boxes.append(box.translate([x - w / 2, bottom, z - w / 2]))
-    return m3.Manifold.batch_boolean(boxes, m3.OpType.Add)
+    w = SPACING * scale  # one cell: neighbours meet (united in the field, no boolean)
+    c = r.points[sel] * scale
+    lo = np.stack([c[:, 0] - w / 2, c[:, 1] - 0.5 * SPACING * scale, c[:, 2] - w / 2], 1)
+    hi = np.stack([c[:, 0] + w / 2, np.full(len(c), root + 1.0), c[:, 2] + w / 2], 1)
+    return np.stack([lo, hi], 1)
+
+
+def _pillar_fill(design: Design, scale: float, boxes: np.ndarray | None, top: float) -> float:
+    """Volume (mm^3) of the empty lattice cells below ``top`` (mm) that the root pillars fill:
+    what the export adds to the design on purpose, where the simulator glues sites to the base
+    across an empty cell."""
+    if boxes is None:
+        return 0.0
+    cell = SPACING * scale
+    r = design.robot
+    active = {tuple(v) for v in np.round(r.points[r.active()] / SPACING - 0.5).astype(int)}
+    filled = set()
+    for lo, hi in boxes:
+        i, k = int(round(lo[0] / cell)), int(round(lo[2] / cell))
+        for j in range(int(round(lo[1] / cell)), int(np.floor(min(hi[1], top) / cell + 1e-6))):
+            filled.add((i, j, k))
+    return len(filled - active) * cell**3
 
 
 def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
@@ -159,11 +176,12 @@ def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
     s = cfg.scale_mm
     t0 = time.perf_counter()
     body, regions, gap = _fields(design, s, extrude_top=3)
-    finger = body.solid(keep_largest=False)
     root = (FULL[1] - BASE) * s  # the base's lower face; the finger hangs below it
+    # the finger stays INSET inside its workspace's sides: a finger face nearly coplanar with
+    # the base's side face leaves edges of 1e-6 mm in the fused assembly (an STL cannot keep them)
+    ws = np.array([[INSET, -1.0, INSET], [FULL[0] * s - INSET, root + 2.0, FULL[2] * s - INSET]])
     pillars = _root_pillars(design, s, root)
-    if pillars is not None:
-        finger = finger + pillars
+    finger = body.solid(keep_largest=False, boxes=pillars, clip=ws)
     finger = finger.trim_by_plane([0.0, -1.0, 0.0], -root)  # keep y <= root
     finger = largest_component(finger)
     plane = FULL[2] / 2 * s  # the finger lies in z < plane, its mirror in z > plane
@@ -172,12 +190,14 @@ def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
     t_mesh = time.perf_counter()
     vox = Voxels.of(finger, cfg.pitch)
     tendons = route_finger(finger, regions, "finger", FULL[1] * s, root, cfg.radius, cfg.min_wall,
-                           {0: -1.0, 1: +1.0}, cfg.pitch, voxels=vox)
+                           {0: -1.0, 1: +1.0}, cfg.pitch, voxels=vox,
+                           base_xz=(0.0, 0.0, FULL[0] * s, FULL[2] * s))
     tendons += [mirror_tendon(t, plane, "finger_mirror") for t in tendons]
     t_route = time.perf_counter()
     # the volume check compares the part of the finger the design holds (below its top sites)
     design_top = (design.robot.points[design.robot.active(), 1].max() + SPACING / 2) * s
     body_volume = finger.trim_by_plane([0.0, -1.0, 0.0], -design_top).volume()
+    fill = _pillar_fill(design, s, pillars, design_top)
     bridge = finger.volume() - body_volume
     info: dict = {}
     if cfg.infill == "voronoi":
@@ -199,8 +219,10 @@ def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
             hole = m3.Manifold.cylinder(BASE * s + 2.0, r, r, 24)
             holes.append(hole.rotate([-90.0, 0.0, 0.0]).translate([x, root - 1.0, z]))
     # the fingers only touch the plate's lower face; in the fused assembly the plate reaches
-    # 0.01 mm lower so fingers and plate overlap and join into one body
-    glue = m3.Manifold.cube([FULL[0] * s, 2 * GLUE, FULL[2] * s]).translate([0.0, root - GLUE, 0.0])
+    # GLUE lower so fingers and plate overlap and join into one body (one box, cut once: a
+    # separate glue slab shares the holes' walls with the plate, which leaves slivers)
+    plate = m3.Manifold.cube([FULL[0] * s, BASE * s + GLUE, FULL[2] * s])
+    plate = plate.translate([0.0, root - GLUE, 0.0])
     cut = m3.Manifold.batch_boolean(holes, m3.OpType.Add)
     if cfg.channels:  # cut the designed finger; its mirror copy stays its exact reflection
         tubes = m3.Manifold.batch_boolean([channel_solid(t, cfg.radius, root) for t in tendons
@@ -208,14 +230,17 @@ def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
         finger = finger - tubes
         mirror = finger.mirror([0.0, 0.0, 1.0]).translate([0.0, 0.0, 2 * plane])
         cut = cut + tubes + tubes.mirror([0.0, 0.0, 1.0]).translate([0.0, 0.0, 2 * plane])
-    base, glue = base - cut, glue - cut
+    base, plate = finish(base - cut), plate - cut
+    finger = finish(finger)
+    mirror = finger.mirror([0.0, 0.0, 1.0]).translate([0.0, 0.0, 2 * plane])
     t_channels = time.perf_counter()
     parts = {"finger": finger, "finger_mirror": mirror, "base": base}
-    union = m3.Manifold.batch_boolean([*parts.values(), glue], m3.OpType.Add)
+    union = finish(m3.Manifold.batch_boolean([finger, mirror, plate], m3.OpType.Add))
     timings = {"mesh_s": t_mesh - t0, "routing_s": t_route - t_mesh,
                "infill_s": t_infill - t_route, "channels_s": t_channels - t_infill,
                "assembly_s": time.perf_counter() - t_channels}
-    notes = {"root_gap_mm": round(gap, 3), "root_bridge_mm3": round(bridge, 1)}
+    notes = {"root_gap_mm": round(gap, 3), "root_bridge_mm3": round(bridge, 1),
+             "root_pillar_fill_mm3": round(fill, 1)}
     return Assembly(parts, union, tendons, design_volume(design, s, largest=True),
                     body_volume, timings, info, notes)
 
@@ -232,7 +257,7 @@ def build_body(design: Design, cfg: ExportConfig) -> Assembly:
         if others:  # the part of the body where group g outweighs every other group
             stack = np.max([o.grid for o in others], axis=0)
             rival = OccupancyField(stack, f.origin, f.spacing, f.scale)
-            region = f.solid(other=rival, keep_largest=False) ^ body
+            region = f.solid(other=rival, keep_largest=False, within=body_field)
         else:
             region = body
         pieces = sorted(region.decompose(), key=lambda m: -m.volume())
@@ -245,6 +270,7 @@ def build_body(design: Design, cfg: ExportConfig) -> Assembly:
         from dbtool.export.infill import InfillConfig, voronoi_infill
 
         parts["body"], info = voronoi_infill(body, InfillConfig(shell=cfg.shell))
+    parts = {k: finish(v) for k, v in parts.items()}
     return Assembly(parts, parts["body"], [], design_volume(design, s, largest=True), body.volume(),
                     {"mesh_s": t1 - t0, "infill_s": time.perf_counter() - t1}, info)
 
@@ -328,7 +354,9 @@ def report(design: Design, asm: Assembly, cfg: ExportConfig, name: str, files: l
         "volume_check": {
             "part": main, "design_solid_mm3": asm.design_volume_mm3,
             "mesh_mm3": asm.body_volume_mm3,
-            "ratio": asm.body_volume_mm3 / asm.design_volume_mm3,
+            # the gripper's root pillars fill empty cells on purpose: compare against both
+            "ratio": asm.body_volume_mm3 / (asm.design_volume_mm3
+                                            + asm.notes.get("root_pillar_fill_mm3", 0.0)),
             "design_total_mm3": design_volume(design, cfg.scale_mm),  # loose pieces included
         },
         "timings_s": {k: round(v, 3) for k, v in asm.timings.items()},
@@ -361,9 +389,12 @@ def report_markdown(rep: dict) -> str:
         lines.append(f"| {k} | {p['watertight']} | {p['is_volume']} | {p['bodies']} | "
                      f"{p['genus']} | {p['volume_mm3']:.0f} | {box} | {wall} |")
     v = rep["volume_check"]
+    fill = rep.get("root_pillar_fill_mm3", 0.0)
+    plus = f" plus {fill:.0f} mm³ of root cells the pillars fill" if fill > 0 else ""
     lines += ["", f"Meshed {v['part']} {v['mesh_mm3']:.0f} mm³ against the design's solid "
-                  f"{v['design_solid_mm3']:.0f} mm³ (ratio {v['ratio']:.3f}). The thinnest wall is "
-                  f"the shortest ray from a face, along its inward normal, through the part."]
+                  f"{v['design_solid_mm3']:.0f} mm³{plus} (ratio {v['ratio']:.3f}). The thinnest "
+                  "wall is the shortest ray from a face, along its inward normal, through the "
+                  "part."]
     if rep.get("root_gap_mm", 0) > 0:
         lines += ["", f"The design's top sites stop {rep['root_gap_mm']:.2f} mm below the base "
                       "(the simulator's grid joins them across it); the export fills that gap "

@@ -5,8 +5,8 @@ spacing 2.5 mm, beam thickness 0.4 mm) to soften them. :func:`voronoi_infill` re
 a solid skin (``shell`` mm thick) around such a foam and returns one watertight manifold:
 
 1. The inner region (the part eroded by ``shell``) is the ``shell`` level set, meshed by
-   manifold3d's marching tetrahedra, of a signed distance field: the part is voxelised slice by
-   slice (winding numbers of its cross-sections, no ray casting) and
+   marching tetrahedra (:mod:`dbtool.export.isosurface`), of a signed distance field: the part
+   is voxelised slice by slice (winding numbers of its cross-sections, no ray casting) and
    ``scipy.ndimage.distance_transform_edt`` gives the distance. skin = part - inner region.
 2. Seeds on a body-centred cubic grid jittered by +-10 % of its cell (one seed per
    ``spacing**3``, reproducible from ``seed``; a near-Kelvin foam with few very short edges).
@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dbtool.export.isosurface import marching_tetrahedra
 from dbtool.export.lattice import _EPS, _frames, _Lattice, _pieces, _sample_segments, _seg_dist
 from dbtool.export.mesh import manifold3d
 
@@ -74,34 +75,6 @@ class _Field:
 
         u = (np.atleast_2d(p) - self.origin) / self.pitch
         return map_coordinates(self.sdf, u.T, order=1, mode="constant", cval=-1e3)
-
-    def callback(self):
-        """A fast scalar ``f(x, y, z)`` for ``Manifold.level_set`` (called per grid point)."""
-        g = self.sdf.ravel().tolist()
-        nx, ny, nz = self.sdf.shape
-        nyz = ny * nz
-        ox, oy, oz = (float(v) for v in self.origin)
-        inv = 1.0 / self.pitch
-        far = -1e3
-
-        def f(x: float, y: float, z: float) -> float:
-            u, v, w = (x - ox) * inv, (y - oy) * inv, (z - oz) * inv
-            if u < 0.0 or v < 0.0 or w < 0.0:
-                return far
-            i, j, k = int(u), int(v), int(w)
-            if i >= nx - 1 or j >= ny - 1 or k >= nz - 1:
-                return far
-            fu, fv, fw = u - i, v - j, w - k
-            b = i * nyz + j * nz + k
-            c00 = g[b] + (g[b + 1] - g[b]) * fw
-            c01 = g[b + nz] + (g[b + nz + 1] - g[b + nz]) * fw
-            b += nyz
-            c10 = g[b] + (g[b + 1] - g[b]) * fw
-            c11 = g[b + nz] + (g[b + nz + 1] - g[b + nz]) * fw
-            c0 = c00 + (c01 - c00) * fv
-            return c0 + (c10 + (c11 - c10) * fv - c0) * fu
-
-        return f
 
 
 def _inside_mask(solid, origin: np.ndarray, pitch: float, shape) -> np.ndarray:
@@ -153,10 +126,10 @@ def _inner_region(field: _Field, shell: float):
     keep = np.argwhere(field.sdf > shell)
     if len(keep) == 0:
         return m3.Manifold()
-    lo = field.origin + (keep.min(0) - 2) * field.pitch
-    hi = field.origin + (keep.max(0) + 2) * field.pitch
-    edge = 1.25 * field.pitch
-    return m3.Manifold.level_set(field.callback(), [*lo, *hi], edge, shell)
+    a = np.maximum(keep.min(0) - 2, 0)
+    b = np.minimum(keep.max(0) + 3, field.sdf.shape)
+    box = field.sdf[a[0]:b[0], a[1]:b[1], a[2]:b[2]] - shell
+    return marching_tetrahedra(box, field.origin + a * field.pitch, field.pitch)
 
 
 # --------------------------------------------------------------------------- seeds and edges

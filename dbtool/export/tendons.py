@@ -65,13 +65,15 @@ def route_finger(finger, region_fields: dict[int, OccupancyField], finger_name: 
                  top_mm: float, root_mm: float, radius: float, wall: float,
                  side_sign: dict[int, float],
                  pitch: float = 0.5, n_points: int = 4,
-                 voxels: Voxels | None = None) -> list[Tendon]:
+                 voxels: Voxels | None = None,
+                 base_xz: tuple[float, float, float, float] | None = None) -> list[Tendon]:
     """Tendons of one finger manifold (mm).
 
     ``region_fields``: group -> field of the group's particles (same grid as the body);
     ``side_sign``: group -> +1 if its tendon should sit toward +z, -1 toward -z;
     ``top_mm``: height of the base's top face, where the tubes exit; ``root_mm``: the finger's
-    root face (the base's lower face).
+    root face (the base's lower face); ``base_xz``: the base's (x0, z0, x1, z1) in mm, which
+    a side exit's hole through the base must keep ``radius + wall`` away from.
     """
     vox = voxels or Voxels.of(finger, pitch)
     depth = vox.depth()
@@ -126,7 +128,7 @@ def route_finger(finger, region_fields: dict[int, OccupancyField], finger_name: 
         tendon.exit = [round(x, 3), top_mm, round(z, 3)]
         tendon.clearance_mm = _clearance(tendon, vox, depth, root_mm, radius, need, pitch)
         if tendon.clearance_mm < wall - 0.5 * pitch:
-            side = _side_exit(finger, pts[0], g)
+            side = _side_exit(finger, pts[0], g, base_xz, need)
             if side is not None:
                 alt = Tendon(**{**asdict(tendon), "exit": [side[0], top_mm, side[2]],
                                 "via": [[side[0], root_mm, side[2]], side]})
@@ -164,10 +166,13 @@ def _clearance(t: Tendon, vox: Voxels, depth: np.ndarray, root_mm: float, radius
     return round(float(vox.depth_at(path, depth).min() - radius), 3)
 
 
-def _side_exit(finger, first: np.ndarray, group: int) -> list[float] | None:
+def _side_exit(finger, first: np.ndarray, group: int,
+               base_xz: tuple[float, float, float, float] | None = None,
+               margin: float = 0.0) -> list[float] | None:
     """Where a channel drilled from ``first`` leaves the finger by the shortest of the
     directions +-x (front, back) and, for the outer tendon, -z (away from the object); 1 mm
-    outside the surface."""
+    outside the surface. With ``base_xz``, exits whose hole up through the base would come
+    within ``margin`` of the base's edge are skipped."""
     best = None
     dirs = [np.array([1.0, 0.0, 0.0]), np.array([-1.0, 0.0, 0.0])]
     if ROLES.get(group) == "extension":
@@ -176,6 +181,10 @@ def _side_exit(finger, first: np.ndarray, group: int) -> list[float] | None:
         hits = finger.ray_cast(first.tolist(), (first + 200.0 * d).tolist())
         if hits:
             dist = hits[0].distance * 200.0
+            x, z = (first + (dist + 1.0) * d)[[0, 2]]
+            if base_xz is not None and not (base_xz[0] + margin <= x <= base_xz[2] - margin
+                                            and base_xz[1] + margin <= z <= base_xz[3] - margin):
+                continue  # the hole would break out of the base's edge
             if best is None or dist < best[0]:
                 best = (dist, first + (dist + 1.0) * d)
     return None if best is None else best[1].round(3).tolist()
@@ -224,10 +233,14 @@ def channel_solid(tendon: Tendon, radius: float, root_mm: float, segments: int =
         runs = [np.array([top, below]), np.array([tendon.via[-1], *tendon.points])]
     else:
         runs = [np.vstack([top, tendon.path()])]
-    ball = m3.Manifold.sphere(radius, segments)
     pieces = []
-    for path in runs:  # capsules: hulls of the same balls, so the joints meet without slivers
-        balls = [ball.translate(list(p)) for p in path]
-        pieces += [m3.Manifold.batch_hull([a, b]) for a, b in zip(balls[:-1], balls[1:],
-                                                                    strict=True)]
+    for path in runs:
+        # capsules: hulls of consecutive balls. Each capsule's balls are turned differently, so
+        # at a joint the two polygonal balls cross instead of sharing faces: identical balls
+        # left coincident vertices, which an STL file welds into a pinch
+        for k, (a, b) in enumerate(zip(path[:-1], path[1:], strict=True)):
+            turn = [23.0 * k + 7.0, 37.0 * k + 11.0, 0.0]
+            ball = m3.Manifold.sphere(radius, segments).rotate(turn)
+            pieces.append(m3.Manifold.batch_hull([ball.translate(list(a)),
+                                                  ball.translate(list(b))]))
     return m3.Manifold.batch_boolean(pieces, m3.OpType.Add)
