@@ -19,6 +19,10 @@
   co-designed samples to that family's corpus shapes and their performance, with and without
   the prompt, from the embedding optimised for (task, seed) where ``embedding`` ran it (else
   from the null embedding).
+* ``textwindow``: how the prompt's weight and window trade the move toward the family for
+  performance, cheaply: ``--samples`` designs per (variant, seed) from the plain composed
+  sampler (no physics term), for variants ``WEIGHT@T_MIN`` (``--variants``; the prompt guides
+  the steps with t >= T_MIN) and ``none``.
 
 Each finished (experiment, task, seed) is cached in ``benchmarks/results/codesign-cache/`` so
 an interrupted run continues where it stopped. Prints markdown tables and writes
@@ -29,6 +33,7 @@ Usage::
     python benchmarks/codesign.py embedding --seeds 0 1 2
     python benchmarks/codesign.py kappa --seeds 0 1 2 3
     python benchmarks/codesign.py text --seeds 0 1 2 3
+    python benchmarks/codesign.py textwindow --tasks crawling --variants 3@0 1@0 3@350
     python benchmarks/codesign.py conditions --tasks gripping
     python benchmarks/codesign.py bandit --tasks gripping
 """
@@ -50,6 +55,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from _results import write_result  # noqa: E402
 
 from dbtool.atomic import atomic_write_text  # noqa: E402
+from dbtool.codesign.config import PROMPT_T_MIN  # noqa: E402
 
 CACHE = Path(__file__).parent / "results" / "codesign-cache"
 TEXT_PAIRS = {"balancing": ("a ball", "ball"), "crawling": ("a star", "star")}
@@ -171,7 +177,8 @@ def bandit(metrics: list[np.ndarray], optimiser: str, lr: float, rng, epochs: in
 def codesign_run(prior, task, seed: int, kappa: float, gamma: float | None,
                  prompt: str | None = None, c: torch.Tensor | None = None,
                  min_move: float | None = None, smooth: bool = False,
-                 step_scale: float | None = None, prompt_guidance: float = 3.0) -> dict:
+                 step_scale: float | None = None, prompt_guidance: float = 3.0,
+                 prompt_t_min: int = 0) -> dict:
     from dbtool.codesign.config import preset
     from dbtool.codesign.embedding import score
     from dbtool.codesign.langevin import codesign_sample
@@ -184,7 +191,7 @@ def codesign_run(prior, task, seed: int, kappa: float, gamma: float | None,
                   step_scale=cod.step_scale if step_scale is None else step_scale)
     conds = [(torch.zeros(1, 384) if c is None else c, emb.guidance)]
     if prompt:
-        conds.append((prior.embed(prompt), prompt_guidance))
+        conds.append((prior.embed(prompt), prompt_guidance, prompt_t_min))
     t = get_task(task)
     res = codesign_sample(prior, t, conds, cod, seed=seed, steps=emb.sample_steps)
     metric = float(score(res.cloud[None], t, controllers=[res.controller])[0])
@@ -193,6 +200,28 @@ def codesign_run(prior, task, seed: int, kappa: float, gamma: float | None,
         out["metric_prescribed"] = float(score(res.cloud[None], t)[0])
         out["controller"] = res.controller.tolist()
     return out
+
+
+def textwindow_run(prior, task: str, seed: int, variant: str, n: int) -> dict:
+    """``n`` designs of the plain composed sampler (guidance 3 on the text experiment's base
+    condition, 32 steps, sampler seed 100 + seed), plus the prompt as ``variant`` says
+    (``none`` or ``WEIGHT@T_MIN``): metric and Chamfer to the prompt's family."""
+    from dbtool.codesign.embedding import score
+    from dbtool.prior.diffusion import SCALE
+    from dbtool.prior.metrics import chamfer_to_family
+    from dbtool.sim.tasks import get_task
+
+    prompt, family = TEXT_PAIRS[task]
+    c = start(task, seed)
+    c = torch.zeros(1, 384) if c is None else c
+    conds = [(c, 3.0)]
+    if variant != "none":
+        w, t_min = variant.split("@")
+        conds.append((prior.embed(prompt), float(w), int(t_min)))
+    *_, last = prior.sampler(conds, n, 32, 100 + seed, eta=1.0)
+    x = last.x.numpy() / SCALE
+    return {"metric": [float(m) for m in score(x, get_task(task))],
+            "chamfer": [chamfer_to_family(xi, family) for xi in x]}
 
 
 def linesearch_run(task: str, seed: int, steps=(-0.001, 0.0002, 0.001, 0.005)) -> dict:
@@ -238,11 +267,17 @@ def summary(values: list[float]) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("experiment", choices=["embedding", "kappa", "text", "conditions",
-                                           "bandit", "linesearch", "spread", "controller"])
+                                           "bandit", "linesearch", "spread", "controller",
+                                           "textwindow"])
+    ap.add_argument("--variants", nargs="+", default=["3@0", "1@0", "3@300", "3@350", "3@400"],
+                    help="textwindow: prompt WEIGHT@T_MIN variants (besides none)")
+    ap.add_argument("--samples", type=int, default=4, help="textwindow: designs per seed")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--tasks", nargs="+")
     ap.add_argument("--epochs", type=int, default=4)
     ap.add_argument("--min-move", type=float, help="override the preset's min_move (kappa)")
+    ap.add_argument("--prompt-t-min", type=int, default=PROMPT_T_MIN,
+                    help="the prompt guides the steps with t >= this (text; 0: every step)")
     ap.add_argument("--prompt-guidance", type=float, default=3.0,
                     help="guidance weight of the text prompt (text)")
     ap.add_argument("--step-scale", type=float,
@@ -366,18 +401,39 @@ def main() -> None:
                   "| --- | ---: | --- |")
             for name, vals in rows.items():
                 print(f"| {name} | {summary(vals)} | {' / '.join(f'{v:.5f}' for v in vals)} |")
+    elif args.experiment == "textwindow":
+        for task in args.tasks or ["crawling"]:
+            rows = {}
+            print(f"\n{task} (seeds {args.seeds}, {args.samples} designs each)\n\n| prompt "
+                  "| metric | kept (per seed) | Chamfer |\n| --- | ---: | --- | ---: |")
+            for v in ["none", *args.variants]:
+                runs = [cached(f"textwindow-{task}-{v}-{s}-n{args.samples}{tag(task)}",
+                               lambda s=s, v=v, task=task: textwindow_run(
+                                   prior, task, s, v, args.samples)) for s in args.seeds]
+                rows[v] = {"metric": [float(np.nanmean(r["metric"])) for r in runs],
+                           "chamfer": [float(np.mean(r["chamfer"])) for r in runs]}
+                base = rows["none"]["metric"]
+                kept = [m / b for m, b in zip(rows[v]["metric"], base, strict=True)]
+                rows[v]["kept"] = kept
+                print(f"| {v} | {summary(rows[v]['metric'])} | "
+                      f"{statistics.fmean(rows[v]['metric']) / statistics.fmean(base):.2f} "
+                      f"({' / '.join(f'{k:.2f}' for k in kept)}) | "
+                      f"{summary(rows[v]['chamfer'])} |", flush=True)
+            result[task] = rows
     else:
         for task in args.tasks or list(TEXT_PAIRS):
             prompt, family = TEXT_PAIRS[task]
             rows = {}
-            pg = args.prompt_guidance
+            pg, tm = args.prompt_guidance, args.prompt_t_min
             for name, p in (("no prompt", None), (f"+ {prompt!r}", prompt)):
                 runs = [cached(f"text-{task}-{'prompt' if p else 'none'}-{s}"
                                + (tag(task) if start(task, s) is not None else "")
-                               + (f"-pg{pg:g}" if p and pg != 3.0 else ""),
+                               + (f"-pg{pg:g}" if p and pg != 3.0 else "")
+                               + (f"-tm{tm}" if p and tm else ""),
                                lambda s=s, p=p, task=task: codesign_run(
                                    prior, task, s, 1e4, None, p, c=start(task, s),
-                                   prompt_guidance=args.prompt_guidance))
+                                   prompt_guidance=args.prompt_guidance,
+                                   prompt_t_min=args.prompt_t_min))
                         for s in args.seeds]
                 rows[name] = {"metric": [r["metric"] for r in runs],
                               "chamfer": [chamfer_to_family(np.array(r["cloud"]), family)
@@ -389,7 +445,8 @@ def main() -> None:
     suffix = (f"-mm{args.min_move:g}" if args.min_move is not None else "") + (
         "-smooth" if args.smooth else "") + (
         f"-ss{args.step_scale:g}" if args.step_scale is not None else "") + (
-        f"-pg{args.prompt_guidance:g}" if args.prompt_guidance != 3.0 else "")
+        f"-pg{args.prompt_guidance:g}" if args.prompt_guidance != 3.0 else "") + (
+        f"-tm{args.prompt_t_min}" if args.experiment == "text" and args.prompt_t_min else "")
     write_result(result, None, Path(__file__).parent / "results" /
                  f"codesign-{args.experiment}{suffix}.json", False)
 

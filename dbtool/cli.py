@@ -8,6 +8,8 @@ from pathlib import Path
 
 import typer
 
+from dbtool.codesign.config import PROMPT_T_MIN
+
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="dbtool: breed soft robots with a diffusion prior and a differentiable "
                        "MPM simulator (DiffuseBot).")
@@ -122,6 +124,8 @@ def design(
     prompt: str = typer.Option(None, help="text feedback composed with the optimised "
                                           "embedding, e.g. 'a star' (SPEC 6)"),
     prompt_guidance: float = typer.Option(3.0, help="guidance weight of --prompt"),
+    prompt_t_min: int = typer.Option(PROMPT_T_MIN, min=0, help="--prompt guides the diffusion "
+                                     "steps with t >= this (0: every step)"),
     start: str = typer.Option(None, help="prompt the embedding starts from (default: null)"),
     seed: int = typer.Option(0, help="seed of the whole run"),
     epochs: int = typer.Option(None, min=0, help="embedding epochs (default: the preset's)"),
@@ -159,7 +163,7 @@ def design(
         else:
             t = get_task(task)
             settings = Settings(t.name, preset, seed, epochs, start, prompt, prompt_guidance,
-                                samples, kappa, None, steps)
+                                samples, kappa, None, steps, prompt_t_min=prompt_t_min)
             settings.configs()
             runtime.init(arch=arch)
             seed_everything(seed)

@@ -181,11 +181,22 @@ def test_design_cli_bad_input_fails_cleanly(tmp_path):
 
 
 def test_text_feedback_adds_its_own_guidance_term(prior, tmp_path):
+    from dbtool.codesign.config import PROMPT_T_MIN
+    from dbtool.prior.diffusion import guided_eps
+
     run = DesignRun(tmp_path / "r", _settings(prompt="a star", prompt_guidance=2.0), prior)
-    (c, s), (h, sh) = run.conds()
-    assert s == run.emb_cfg.guidance and sh == 2.0
+    (c, s), (h, sh, t_min) = run.conds()
+    assert s == run.emb_cfg.guidance and sh == 2.0 and t_min == PROMPT_T_MIN
     assert torch.allclose(h, prior.embed("a star"))
     assert len(DesignRun(tmp_path / "q", _settings(), prior).conds()) == 1
+    # the prompt guides the steps at t >= t_min only; below, the embedding's term alone
+    x = torch.randn(1, 64, 3, generator=torch.Generator().manual_seed(0))
+    for t, with_prompt in ((t_min + 50, True), (t_min, True), (t_min - 1, False)):
+        got = guided_eps(prior.eps, x, t, run.conds())
+        both = guided_eps(prior.eps, x, t, [(c, s), (h, sh)])
+        alone = guided_eps(prior.eps, x, t, [(c, s)])
+        assert torch.allclose(got, both if with_prompt else alone, atol=1e-5), t
+        assert not torch.allclose(both, alone, atol=1e-3)
 
 
 def test_quick_preset_keeps_the_paper_schedules_drift_and_controller_budgets():

@@ -28,7 +28,13 @@ import numpy as np
 import torch
 
 from dbtool.atomic import atomic_write, atomic_write_text
-from dbtool.codesign.config import PRESETS, CodesignConfig, EmbeddingConfig, preset
+from dbtool.codesign.config import (
+    PRESETS,
+    PROMPT_T_MIN,
+    CodesignConfig,
+    EmbeddingConfig,
+    preset,
+)
 from dbtool.codesign.embedding import EmbeddingOptimiser, score
 from dbtool.codesign.langevin import codesign_sample
 from dbtool.sim.tasks import N_STEPS, get_task
@@ -56,6 +62,7 @@ class Settings:
     kappa: float | None = None  # override Table 5's kappa (0: the ablation)
     gamma: float | None = None  # override Table 5's gamma
     n_steps: int = N_STEPS
+    prompt_t_min: int = PROMPT_T_MIN  # the prompt guides the steps with t >= this (0: all)
 
     def configs(self) -> tuple[EmbeddingConfig, CodesignConfig]:
         if self.preset not in PRESETS:
@@ -162,7 +169,8 @@ class DesignRun:
             ck = torch.load(ck_path, map_location="cpu", weights_only=True)
             if not isinstance(ck, dict) or ck.get("format") != FORMAT:
                 raise RunError(f"{ck_path} is not a dbtool run checkpoint")
-            run = cls(path, Settings(**ck["settings"]), prior)
+            # runs from before the prompt window had the prompt on every step
+            run = cls(path, Settings(**{"prompt_t_min": 0, **ck["settings"]}), prior)
             o = run.opt
             o.embedding.load_state_dict(ck["embedding"])
             o.opt.load_state_dict(ck["adam"])
@@ -185,13 +193,14 @@ class DesignRun:
         return run
 
     # ------------------------------------------------------------------ work
-    def conds(self) -> list[tuple[torch.Tensor, float]]:
+    def conds(self) -> list[tuple]:
         """Guidance terms of the co-design sampler: the optimised embedding, plus the text
-        feedback prompt with its own weight (SPEC 6)."""
+        feedback prompt with its own weight, guiding the steps with ``t >= prompt_t_min``
+        (SPEC 6, docs/codesign.md)."""
         conds = [(self.opt.current(), self.emb_cfg.guidance)]
         if self.settings.prompt:
             conds.append((self.prior.embed(self.settings.prompt),
-                          self.settings.prompt_guidance))
+                          self.settings.prompt_guidance, self.settings.prompt_t_min))
         return conds
 
     def run(self, progress: bool = True):

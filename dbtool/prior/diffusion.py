@@ -143,15 +143,20 @@ class Diffusion:
 
 
 def guided_eps(model: EpsModel, x: torch.Tensor, t: int,
-               conds: Sequence[tuple[torch.Tensor, float]]) -> torch.Tensor:
+               conds: Sequence[tuple]) -> torch.Tensor:
     """Composed classifier-free guidance (SPEC section 6):
     ``eps = eps(x, null) + sum_i s_i (eps(x, c_i) - eps(x, null))``.
 
-    With one condition and ``s = 1`` this is the conditional prediction; the unconditional and
-    all conditional predictions run as one batch."""
-    b = x.shape[0]
+    A term is ``(embedding, scale)`` or ``(embedding, scale, t_min)``: the latter only guides
+    the steps with ``t >= t_min`` (text feedback shapes the coarse body and leaves the last
+    steps to the optimised embedding, docs/codesign.md). With one condition and ``s = 1`` this
+    is the conditional prediction; the unconditional and all conditional predictions run as
+    one batch."""
     if not conds:
         raise ValueError("guidance needs at least one condition")
+    conds = [(c[0], c[1]) for c in conds if len(c) < 3 or t >= c[2]] or [
+        (conds[0][0], 0.0)]  # every term windowed out: the unconditional prediction
+    b = x.shape[0]
     dim = conds[0][0].shape[-1]
     dev = x.device
     if len(conds) == 1 and conds[0][1] == 1.0:  # plain conditional prediction: one pass

@@ -113,7 +113,7 @@ class Prior:
                 ) -> Iterator[Step]:
         """The base sampler as a generator of :class:`Step` (model space, see
         :meth:`Diffusion.steps`); the caller may replace ``step.x`` between updates."""
-        for c, s in conds:
+        for c, s, *_ in conds:
             if not np.isfinite(s) or abs(s) > MAX_GUIDANCE:
                 raise ValueError(f"guidance scale {s} is outside [-{MAX_GUIDANCE}, "
                                  f"{MAX_GUIDANCE}]")
