@@ -185,7 +185,6 @@ def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
     finger = finger.trim_by_plane([0.0, -1.0, 0.0], -root)  # keep y <= root
     finger = largest_component(finger)
     plane = FULL[2] / 2 * s  # the finger lies in z < plane, its mirror in z > plane
-    mirror = finger.mirror([0.0, 0.0, 1.0]).translate([0.0, 0.0, 2 * plane])
     base = m3.Manifold.cube([FULL[0] * s, BASE * s, FULL[2] * s]).translate([0.0, root, 0.0])
     t_mesh = time.perf_counter()
     vox = Voxels.of(finger, cfg.pitch)
@@ -209,7 +208,6 @@ def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
                        if t.finger == "finger"]
             foam = foam + (m3.Manifold.batch_boolean(sleeves, m3.OpType.Add) ^ finger)
         finger = foam
-        mirror = finger.mirror([0.0, 0.0, 1.0]).translate([0.0, 0.0, 2 * plane])
     t_infill = time.perf_counter()
     # four mounting holes through the plate, 8 mm in from its corners
     r = 0.5 * cfg.mount_hole
@@ -228,7 +226,6 @@ def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
         tubes = m3.Manifold.batch_boolean([channel_solid(t, cfg.radius, root) for t in tendons
                                            if t.finger == "finger"], m3.OpType.Add)
         finger = finger - tubes
-        mirror = finger.mirror([0.0, 0.0, 1.0]).translate([0.0, 0.0, 2 * plane])
         cut = cut + tubes + tubes.mirror([0.0, 0.0, 1.0]).translate([0.0, 0.0, 2 * plane])
     base, plate = finish(base - cut), plate - cut
     finger = finish(finger)
