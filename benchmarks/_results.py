@@ -1,28 +1,22 @@
-"""Shared tail of the benchmark scripts: the machine description and the JSON result file."""
+"""Shared tail of the benchmark scripts: the JSON result file with its provenance."""
 
 from __future__ import annotations
 
 import json
-import os
-import platform
-import time
 from pathlib import Path
 
 from dbtool.atomic import atomic_write_text
+from dbtool.provenance import provenance
 
 
-def machine() -> dict:
-    import torch
-
-    return {"platform": platform.platform(), "processor": platform.processor(),
-            "cpus": os.cpu_count(), "torch": torch.__version__}
-
-
-def write_result(result: dict, out: Path | None, default: Path, quick: bool) -> Path:
-    """Write ``result`` (plus machine and time stamp) atomically to ``out``, or to ``default``
-    (``NAME-quick.json`` next to it for a quick run); print and return the path."""
+def write_result(result: dict, out: Path | None, default: Path, quick: bool, config: dict
+                 ) -> Path:
+    """Write ``result`` atomically to ``out``, or to ``default`` (``NAME-quick.json`` next to
+    it for a quick run), after its provenance (commit, dirty flag, hash of the resolved
+    ``config`` and the config, time stamp, machine: :func:`dbtool.provenance.provenance`);
+    print and return the path."""
     path = out or (default.with_name(f"{default.stem}-quick.json") if quick else default)
-    full = {"machine": machine(), **result, "created": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-    atomic_write_text(path, json.dumps(full, indent=2))
+    full = {**provenance(config), **result}
+    atomic_write_text(path, json.dumps(full, indent=2, allow_nan=True))
     print(f"wrote {path}")
     return path

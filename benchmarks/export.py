@@ -31,6 +31,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 from _results import write_result  # noqa: E402
 
+from dbtool.provenance import file_digest  # noqa: E402
+
 RESULTS = Path(__file__).parent / "results"
 
 
@@ -177,15 +179,18 @@ def main() -> None:
     v.add_argument("--seed", type=int, default=0)
     v.add_argument("--channels", action="store_true", help="cut channels in grippers")
     args = ap.parse_args()
+    config = {"benchmark": f"export {args.cmd}", **vars(args)}
     if args.cmd == "time":
         path = args.design or _newest_gripper()
         if path is None:
             sys.exit("error: no gripping design: pass --design FILE")
+        config.update(design=path, design_sha256=file_digest(path))
         result = {"time": time_export(path, args.infill)}
-        write_result(result, None, RESULTS / "export-time.json", False)
+        write_result(result, None, RESULTS / "export-time.json", False, config)
     else:
+        config["designs_sha256"] = [file_digest(p) for p in args.designs]
         result = {"validate": validate(args.designs, args.random, args.seed, args.channels)}
-        write_result(result, None, RESULTS / "export-validate.json", False)
+        write_result(result, None, RESULTS / "export-validate.json", False, config)
 
 
 if __name__ == "__main__":

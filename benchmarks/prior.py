@@ -171,7 +171,10 @@ def main(argv: list[str] | None = None) -> int:
               f"{best['steps']} steps (goal < {GOAL_EPOCH_S:.0f} s: {verdict})")
     from _results import write_result
 
-    write_result({"goal_epoch_s": GOAL_EPOCH_S, "cases": rows}, a.out, DEFAULT_OUT, a.quick)
+    config = {"benchmark": "prior", "cases": QUICK_CASES if a.quick else CASES,
+              "repeats": repeats, "threads": a.threads, "quick": a.quick}
+    write_result({"goal_epoch_s": GOAL_EPOCH_S, "cases": rows}, a.out, DEFAULT_OUT, a.quick,
+                 config)
     return 0
 
 

@@ -132,11 +132,14 @@ def main(argv: list[str] | None = None) -> int:
 
     repeats = a.repeats or (1 if a.quick else 5)
     t0 = time.time()
-    rows = speed(repeats, [64] if a.quick else [64, 128], episode=not a.quick)
-    fams = ["ball", "hook", "quadruped"] if a.quick else list(FAMILIES)
-    acc = clean(fams)
-    rob = noise(NOISE_FAMILIES[:2] if a.quick else NOISE_FAMILIES, 1 if a.quick else 2,
-                [150, 300])
+    config = {"benchmark": "robotize", "repeats": repeats,
+              "grids": [64] if a.quick else [64, 128], "episode": not a.quick,
+              "clean_families": ["ball", "hook", "quadruped"] if a.quick else list(FAMILIES),
+              "noise_families": NOISE_FAMILIES[:2] if a.quick else NOISE_FAMILIES,
+              "noise_per_family": 1 if a.quick else 2, "noise_steps": [150, 300]}
+    rows = speed(repeats, config["grids"], config["episode"])
+    acc = clean(config["clean_families"])
+    rob = noise(config["noise_families"], config["noise_per_family"], config["noise_steps"])
 
     print("\n| DPSR grid | points | lattice | robotize (s) | backward (s) | episode (s) | "
           "episode + grad (s) |")
@@ -155,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"| {m} | {t} | {v['mean_iou']:.3f} | {v['min_iou']:.3f} | "
                   f"{v['single_component']:.0%} |")
     write_result({"speed": rows, "clean_iou": acc, "noise": rob, "quick": a.quick,
-                  "wall_s": time.time() - t0}, a.out, DEFAULT_OUT, a.quick)
+                  "wall_s": time.time() - t0}, a.out, DEFAULT_OUT, a.quick, config)
     return 0
 
 

@@ -345,42 +345,13 @@ def mem_total_gb() -> float | None:
 
 
 def machine_info(threads: int | None) -> dict[str, Any]:
-    from importlib.metadata import PackageNotFoundError, version
+    """The provenance's machine plus what a simulator timing depends on."""
+    from dbtool.provenance import machine
 
-    def ver(pkg: str) -> str | None:
-        try:
-            return version(pkg)
-        except PackageNotFoundError:
-            return None
-
-    try:
-        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True,
-                                text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        commit = None
     env_threads = int(os.environ.get("DBTOOL_THREADS", "0"))
-    return {
-        "cpu_count": os.cpu_count(), "cpu_model": cpu_model(),
-        "mem_total_gb": mem_total_gb(), "platform": platform.platform(),
-        "python": platform.python_version(),
-        "taichi": ver("taichi"), "numpy": ver("numpy"), "dbtool": ver("dbtool"),
-        "threads": threads or env_threads or os.cpu_count(), "arch": "cpu", "precision": "f32",
-        "git_commit": commit,
-    }
-
-
-def write_json(path: Path, data: dict[str, Any]) -> None:
-    """Write ``data`` atomically: a temporary file in the same folder, then a rename."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            json.dump(data, fh, indent=2)
-            fh.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    return {**machine(), "cpu_model": cpu_model(), "mem_total_gb": mem_total_gb(),
+            "threads": threads or env_threads or os.cpu_count(), "arch": "cpu",
+            "precision": "f32"}
 
 
 def evaluate_goals(speed: list[dict], memory: list[dict], compile_: dict | None) -> list[dict]:
@@ -429,7 +400,7 @@ def render(result: dict[str, Any]) -> str:
     lines = [
         f"## dbtool simulator benchmark ({result['timestamp']})",
         "",
-        f"Machine: {mach['cpu_model']}, {mach['cpu_count']} CPUs, {mach['threads']} Taichi "
+        f"Machine: {mach['cpu_model']}, {mach['cpus']} CPUs, {mach['threads']} Taichi "
         f"threads, {mach['platform']}; taichi {mach['taichi']}, numpy {mach['numpy']}.",
         f"Speed: T={result['config']['steps']} control steps x {SUBSTEPS} substeps, median of "
         f"{result['config']['repeats']} runs after 1 warm-up. Memory: one gradient episode of "
@@ -551,7 +522,9 @@ def main(argv: list[str] | None = None) -> int:
     result["goals"] = evaluate_goals(speed, memory, compile_)
     report = render(result)
     result["report"] = report
-    write_json(args.out, result)
+    from _results import write_result
+
+    write_result(result, args.out, DEFAULT_OUT, args.quick, result["config"])
     print(report, flush=True)
     log(f"wrote {args.out}")
     return 0

@@ -3,10 +3,7 @@
 from __future__ import annotations
 
 import json
-import platform
 import random
-import subprocess
-import time
 from pathlib import Path
 
 import numpy as np
@@ -41,28 +38,15 @@ def _default(o):
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
-def _git_sha() -> str | None:
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
-                             timeout=5, cwd=Path(__file__).parent)
-        return out.stdout.strip() or None
-    except (OSError, subprocess.SubprocessError):
-        return None
+def manifest(seed: int, device: str, config: dict | None = None) -> dict:
+    """Seed and device of a run, after its provenance (commit and dirty flag, hash of the
+    resolved ``config``, time stamp, machine and versions; :func:`dbtool.provenance.provenance`,
+    less the config itself, which ``config.json`` holds)."""
+    from dbtool.provenance import provenance
 
-
-def manifest(seed: int, device: str) -> dict:
-    """Versions, seed, git sha and device of a run."""
-    import taichi
-    import torch
-
-    import dbtool
-
-    return {
-        "dbtool": dbtool.__version__, "python": platform.python_version(),
-        "platform": platform.platform(), "numpy": np.__version__, "torch": torch.__version__,
-        "taichi": ".".join(map(str, taichi.__version__)), "seed": seed, "device": device,
-        "git_sha": _git_sha(), "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-    }
+    prov = provenance({} if config is None else config)
+    del prov["config"]
+    return {**prov, "seed": seed, "device": device}
 
 
 class RunDir:
@@ -72,7 +56,7 @@ class RunDir:
         self.path = Path(path)
         self.path.mkdir(parents=True, exist_ok=True)
         write_json(self.path / "config.json", config)
-        write_json(self.path / "manifest.json", manifest(seed, device))
+        write_json(self.path / "manifest.json", manifest(seed, device, config))
 
     def log(self, **metrics) -> None:
         with open(self.path / "metrics.jsonl", "a") as fh:
