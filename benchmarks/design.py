@@ -2,7 +2,7 @@
 into its stages: prior sampling (base model + upsampler), embedding training, robotizing
 (forward and its VJP) and simulation (forward and backward).
 
-The run is the library call behind the CLI (:class:`dbtool.codesign.run.DesignRun`), profiled
+The run is the library call behind the CLI (:class:`dbtool.codesign.design_run.DesignRun`), profiled
 with ``cProfile``: each share is the cumulative time of the stage's entry points, so nested
 calls are not counted twice. Peak memory is the process's maximum resident set size.
 
@@ -56,7 +56,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path)
     args = ap.parse_args()
 
-    from dbtool.codesign.run import DesignRun, Settings
+    from dbtool.codesign.design_run import DesignRun, Settings
     from dbtool.prior.pipeline import Prior
     from dbtool.sim import runtime
 

@@ -147,7 +147,7 @@ def design(
         return _design_particle(task, iterations, steps, run_dir, seed, arch)
     if method != "diffusebot":
         _fail(f"unknown method {method!r}; choose diffusebot or particle")
-    from dbtool.codesign.run import DesignRun, RunError, Settings
+    from dbtool.codesign.design_run import DesignRun, RunError, Settings
     from dbtool.runs import seed_everything
     from dbtool.sim.simulator import SimulationError
     from dbtool.sim.tasks import get_task

@@ -36,7 +36,7 @@ from pathlib import Path
 
 from IPython.display import Image, display
 
-from dbtool.codesign.run import DesignRun, Settings
+from dbtool.codesign.design_run import DesignRun, Settings
 from dbtool.prior.pipeline import Prior
 from dbtool.sim.tasks import TASKS
 

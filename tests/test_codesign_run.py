@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from dbtool.codesign import run as run_mod
+from dbtool.codesign import design_run as run_mod
 from dbtool.codesign.config import CodesignConfig
 from dbtool.codesign.langevin import clip_rms, codesign_sample, rms, stops
-from dbtool.codesign.run import DesignRun, RunError, Settings
+from dbtool.codesign.design_run import DesignRun, RunError, Settings
 from dbtool.design import Design
 from dbtool.prior.pipeline import Prior
 from dbtool.sim.tasks import get_task

@@ -13,9 +13,9 @@ from dataclasses import dataclass, replace
 TASKS = ("balancing", "landing", "crawling", "hurdling", "gripping", "box")
 
 
-# Text feedback (SPEC 6) guides the sampler only at t >= PROMPT_T_MIN: the prompt shapes the
-# coarse body and the optimised embedding (with the physics term) finishes it, so the feedback
-# adds the trait without overwriting the functional body (measured in docs/codesign.md).
+# Text feedback (docs/method.md §6) guides the sampler only at t >= PROMPT_T_MIN: the prompt
+# shapes the coarse body and the optimised embedding (with the physics term) finishes it, so the
+# feedback adds the trait without overwriting the functional body (measured in docs/codesign.md).
 PROMPT_T_MIN = 350
 
 @dataclass(frozen=True)

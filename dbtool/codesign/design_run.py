@@ -1,10 +1,11 @@
-"""One design run (``dbtool design TASK``): embedding optimisation, then diffusion as co-design,
-then the final robot, all in a resumable run directory.
+"""The ``dbtool design TASK`` command's run (the design *run*; the :class:`dbtool.design.Design`
+record it ends with lives in ``dbtool/design.py``): embedding optimisation (docs/method.md §4),
+then diffusion as co-design (§5), then the final robot, all in a resumable run directory.
 
 Files of a run (each written atomically: temp file, then rename)::
 
     config.json      resolved settings and both configs (Tables 4-5 after the preset)
-    manifest.json    versions, seed, git sha, device
+    manifest.json    provenance (commit, config hash, time, machine, versions), seed, device
     metrics.jsonl    one row per epoch and per co-design Langevin step
     checkpoint.pt    state after the last completed epoch / co-designed sample
     best.npz         the best designs of all embedding epochs (clouds, metrics)
@@ -37,7 +38,7 @@ from dbtool.codesign.config import (
 )
 from dbtool.codesign.embedding import EmbeddingOptimiser, score
 from dbtool.codesign.langevin import codesign_sample
-from dbtool.sim.tasks import N_STEPS, get_task
+from dbtool.sim.tasks import N_STEPS, Task, get_task
 
 FORMAT = "dbtool.run/1"
 CHECKPOINT = "checkpoint.pt"
@@ -45,6 +46,29 @@ CHECKPOINT = "checkpoint.pt"
 
 class RunError(ValueError):
     """A run directory or its checkpoint cannot be used."""
+
+
+def guidance_terms(prior, c: torch.Tensor, guidance: float, prompt: str | None = None,
+                   prompt_guidance: float = 3.0, prompt_t_min: int = PROMPT_T_MIN
+                   ) -> list[tuple]:
+    """Guidance terms of the co-design sampler: the embedding ``c`` at ``guidance``, plus the
+    text-feedback ``prompt`` at its own weight, guiding the steps with ``t >= prompt_t_min``
+    only (docs/method.md §6)."""
+    conds: list[tuple] = [(c, guidance)]
+    if prompt:
+        conds.append((prior.embed(prompt), prompt_guidance, prompt_t_min))
+    return conds
+
+
+def codesign_design(prior, task: Task, conds: list[tuple], cfg: CodesignConfig, seed: int,
+                    steps: int, n_steps: int = N_STEPS, on_step=None) -> dict:
+    """One design of diffusion as co-design (docs/method.md §5) and its score:
+    ``{"cloud", "metric", "controller"}``; the metric is the forward-only performance with the
+    co-optimised controller (NaN where the design cannot be robotized or simulated)."""
+    res = codesign_sample(prior, task, conds, cfg, seed=seed, steps=steps, n_steps=n_steps,
+                          on_step=on_step)
+    metric = float(score(res.cloud[None], task, n_steps, controllers=[res.controller])[0])
+    return {"cloud": res.cloud, "metric": metric, "controller": res.controller}
 
 
 @dataclass
@@ -56,7 +80,7 @@ class Settings:
     seed: int = 0
     epochs: int | None = None  # None: the preset's
     start: str | None = None  # prompt c starts from; None: the null embedding
-    prompt: str | None = None  # text feedback (SPEC 6)
+    prompt: str | None = None  # text feedback (docs/method.md §6)
     prompt_guidance: float = 3.0
     samples: int | None = None  # co-designed samples; None: the preset's
     kappa: float | None = None  # override Table 5's kappa (0: the ablation)
@@ -126,7 +150,8 @@ class DesignRun:
                            "--run-dir")
         self.path.mkdir(parents=True, exist_ok=True)
         write_json(self.path / "config.json", self.config())
-        write_json(self.path / "manifest.json", manifest(self.settings.seed, device))
+        write_json(self.path / "manifest.json", manifest(self.settings.seed, device,
+                                                         self.config()))
         self._write_metrics()
 
     def log(self, **row) -> None:
@@ -194,14 +219,11 @@ class DesignRun:
 
     # ------------------------------------------------------------------ work
     def conds(self) -> list[tuple]:
-        """Guidance terms of the co-design sampler: the optimised embedding, plus the text
-        feedback prompt with its own weight, guiding the steps with ``t >= prompt_t_min``
-        (SPEC 6, docs/codesign.md)."""
-        conds = [(self.opt.current(), self.emb_cfg.guidance)]
-        if self.settings.prompt:
-            conds.append((self.prior.embed(self.settings.prompt),
-                          self.settings.prompt_guidance, self.settings.prompt_t_min))
-        return conds
+        """Guidance terms of the co-design sampler (:func:`guidance_terms`) from the optimised
+        embedding and the settings' prompt."""
+        s = self.settings
+        return guidance_terms(self.prior, self.opt.current(), self.emb_cfg.guidance, s.prompt,
+                              s.prompt_guidance, s.prompt_t_min)
 
     def run(self, progress: bool = True):
         """Finish the run from wherever it stands; returns the final :class:`Design`."""
@@ -228,15 +250,12 @@ class DesignRun:
             while len(self.state.samples) < n:
                 k = len(self.state.samples)
                 seed = self.settings.seed * 1_000_003 + 10_007 * (k + 1)
-                res = codesign_sample(
-                    self.prior, self.task, conds, cod, seed=seed, steps=emb.sample_steps,
-                    n_steps=self.settings.n_steps,
+                sample = codesign_design(
+                    self.prior, self.task, conds, cod, seed, emb.sample_steps,
+                    self.settings.n_steps,
                     on_step=lambda r, k=k: self.log(phase="codesign", sample=k, **r))
-                metric = float(score(res.cloud[None], self.task, self.settings.n_steps,
-                                     controllers=[res.controller])[0])
-                self.state.samples.append({"cloud": res.cloud, "metric": metric,
-                                           "controller": res.controller})
-                self.log(phase="codesign", sample=k, final=True, metric=metric)
+                self.state.samples.append(sample)
+                self.log(phase="codesign", sample=k, final=True, metric=sample["metric"])
                 self.checkpoint()
                 bar.update(1)
         return self.finish()
