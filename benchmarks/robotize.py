@@ -38,7 +38,7 @@ def speed(repeats: int, grids: list[int], episode: bool) -> list[dict]:
     import torch
 
     from dbtool.prior.shapes import make_shape
-    from dbtool.robotize.evaluate import BAND
+    from dbtool.robotize.cloud_metric import BAND
     from dbtool.robotize.robotizer import RobotizeConfig, robotize
     from dbtool.sim.rollout import simulate
     from dbtool.sim.tasks import get_task

@@ -313,12 +313,13 @@ def robotize(
     """Turn a point cloud into a simulatable robot (solid, actuators, stiffness)."""
     from dbtool.design import Design
     from dbtool.pointcloud import CloudFileError
-    from dbtool.robotize.files import robotize_file
+    from dbtool.robotize.cloud_file import robotize_cloud_file
     from dbtool.robotize.robotizer import RobotizeConfig
 
     try:
         cfg = RobotizeConfig(res=res, stiffness=stiffness)
-        d, path, png = robotize_file(cloud, task, out, method, noise, t, cfg)
+        done = robotize_cloud_file(cloud, task, out, method, noise, t, cfg)
+        d, path, png = done.design, done.path, done.picture
     except (CloudFileError, ValueError, OSError) as exc:
         _fail(str(exc))
     assert isinstance(d, Design)

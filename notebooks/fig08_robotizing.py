@@ -36,7 +36,7 @@ import numpy as np
 from IPython.display import Image
 
 from dbtool.prior.shapes import make_shape
-from dbtool.robotize.evaluate import evaluate
+from dbtool.robotize.cloud_metric import evaluate
 from dbtool.robotize.quality import iou, noisy
 from dbtool.robotize.robotizer import lattice_dims, noise_std, robotize
 from dbtool.robotize.solid import components

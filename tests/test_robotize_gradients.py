@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from dbtool.prior.shapes import make_shape
-from dbtool.robotize.evaluate import evaluate
+from dbtool.robotize.cloud_metric import evaluate
 from dbtool.robotize.robotizer import robotize
 from dbtool.sim.tasks import get_task
 

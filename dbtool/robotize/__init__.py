@@ -4,7 +4,7 @@
 simulator and returns ``(metric, d metric / d x)``. See ``docs/robotize.md``.
 """
 
-from dbtool.robotize.evaluate import Evaluation, evaluate, evaluate_full
+from dbtool.robotize.cloud_metric import Evaluation, evaluate, evaluate_full
 from dbtool.robotize.robotizer import (
     RobotizeConfig,
     Robotized,

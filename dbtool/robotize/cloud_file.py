@@ -1,8 +1,9 @@
-"""``dbtool robotize``: a cloud file becomes a saved design (``.npz``) and its picture."""
+"""A point-cloud file becomes a saved design (``.npz``) and its picture (``dbtool robotize``;
+docs/method.md §2)."""
 
 from __future__ import annotations
 
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from dbtool.design import Design
@@ -13,9 +14,18 @@ from dbtool.sim.tasks import get_task
 from dbtool.viz.robot import robot_figure
 
 
-def robotize_file(cloud: str | Path, task_name: str, out: str | Path, method: str = "dpsr",
-                  noise: float | None = None, t: int | None = None,
-                  cfg: RobotizeConfig | None = None) -> tuple[Design, Path, Path]:
+@dataclass
+class RobotizedFile:
+    """The design a cloud file became, where it was saved and its picture."""
+
+    design: Design
+    path: Path
+    picture: Path
+
+
+def robotize_cloud_file(cloud: str | Path, task_name: str, out: str | Path,
+                        method: str = "dpsr", noise: float | None = None, t: int | None = None,
+                        cfg: RobotizeConfig | None = None) -> RobotizedFile:
     """Robotize the PLY ``cloud`` for ``task_name``; write the design to ``out`` and a PNG of
     the particles coloured by actuator group next to it. ``t`` (a diffusion step) sets the
     noise level from the cosine schedule; ``noise`` sets it directly."""
@@ -46,4 +56,4 @@ def robotize_file(cloud: str | Path, task_name: str, out: str | Path, method: st
              + (f", groups {counts}" if counts else ""))
     png = robot_figure([("cloud", x), (f"robot ({method})", robot)], task.design_workspace(),
                        out.with_suffix(".png"), title)
-    return design, path, png
+    return RobotizedFile(design, path, png)

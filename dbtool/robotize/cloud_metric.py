@@ -1,4 +1,4 @@
-"""One call from a cloud to a score and its gradient: ``metric, grad_x = evaluate(x, task, u)``.
+"""A cloud's task metric and its gradient in one call: ``metric, grad_x = evaluate(x, task, u)``.
 
 Psi (:func:`dbtool.robotize.robotizer.robotize`) builds the robot, the differentiable MPM
 (:func:`dbtool.sim.rollout.simulate`) scores it and returns d metric / d occupancy per design
@@ -12,6 +12,7 @@ gradients only the active particles are simulated.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,10 +38,11 @@ class Evaluation:
 def evaluate_full(x, task: Task, controller: np.ndarray | None = None, need_grad: bool = True,
                   cfg: RobotizeConfig | None = None, noise: float | None = None,
                   method: str = "dpsr", n_steps: int = N_STEPS, threshold: float | None = None,
-                  progress=None) -> Evaluation:
+                  progress: Callable[[int], object] | None = None) -> Evaluation:
     """Robotize ``x``, simulate with ``controller`` (default: the task's prescribed one) and,
     with ``need_grad``, return d metric / d x and d metric / d controller. ``threshold``
-    overrides the robot's presence threshold (0: smooth presence, see :class:`Robot`)."""
+    overrides the robot's presence threshold (0: smooth presence, see :class:`Robot`);
+    ``progress(1)`` is called as each control step finishes."""
     rz = robotize(x, task, cfg, noise=noise, method=method)
     robot = rz.robot
     if threshold is not None:
