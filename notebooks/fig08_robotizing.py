@@ -90,7 +90,7 @@ Image(pictures[1])
 # sign of the distance from the nearest noisy point, which flips from point to point inside the
 # noise, so its robot is ragged: holes and loose particles. The IoU printed above compares each
 # method's x_t robot with the same method's x_0 robot; `benchmarks/robotize.py` measures it over
-# 20 shapes of 10 families at t = 150 and 300 (`benchmarks/results/robotize.json`).
+# 20 shapes of 10 families at t = 150 and 300 (`benchmarks/results/legacy/robotize.json`).
 #
 # ## A short co-optimisation through each robotizer
 #

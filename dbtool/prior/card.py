@@ -1,7 +1,8 @@
 """``MODEL_CARD.md`` of the shipped prior, rendered from measured files only.
 
 Inputs: the two weights files (sizes, steps, training time, final loss, training config), the
-evaluation JSON of ``dbtool prior evaluate`` and, when present, ``benchmarks/results/prior.json``.
+evaluation JSON of ``dbtool prior evaluate`` and, when present,
+``benchmarks/results/legacy/prior.json``.
 Every number in the tables comes from these files; the design rationale cites the prototype
 measurements of ``notes/prior-calibration.md`` and the training-step timings of the benchmark.
 """
@@ -187,7 +188,7 @@ def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description="Render MODEL_CARD.md from measured files.")
     p.add_argument("eval", type=Path, help="JSON written by `dbtool prior evaluate`")
     p.add_argument("--bench", type=Path,
-                   default=Path(__file__).parents[2] / "benchmarks/results/prior.json")
+                   default=Path(__file__).parents[2] / "benchmarks/results/legacy/prior.json")
     p.add_argument("--out", type=Path, default=Path(__file__).parent / "MODEL_CARD.md")
     a = p.parse_args(argv)
     _, base = load_model(BASE_WEIGHTS)
