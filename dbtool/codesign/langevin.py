@@ -14,7 +14,7 @@ unadjusted Langevin dynamics (eq. 12) on ``log p(x_t | c) + kappa R(Psi(x_t), ph
 
 ``g`` scores the design x_t is heading to: the clean robotizer on the x0-estimate, chained to
 x_t with ``d x0_hat / d x_t ~ 1 / sqrt(abar_t)`` (the Jacobian of eps neglected).
-``target = "xt"`` instead robotizes x_t itself with the noise-aware robotizer of issue 4.
+``target = "xt"`` instead robotizes x_t itself with the noise-aware robotizer (docs/method.md §2).
 ``eta_t = min(step_scale * beta_t, 1 - abar_t)``: the forward variance at t (the step the
 reverse process itself takes on the score there), never more than the noise variance left;
 ``eta_R = max(eta_t, min_move / (K * rho))`` is the physics term's step: the same as the
@@ -70,7 +70,7 @@ class Physics:
 def physics(x_model: torch.Tensor, t: int, task: Task, phi: np.ndarray | None,
             n_steps: int = N_STEPS, noisy: bool = True, smooth: bool = False) -> Physics:
     """Robotize ``x_model`` and differentiate the episode; ``noisy`` robotizes it as an x_t
-    (noise-aware, issue 4), otherwise as a clean cloud; ``smooth`` simulates the robot with
+    (noise-aware, docs/method.md §2), else as a clean cloud; ``smooth`` simulates the robot with
     smooth presence (occupancy-weighted mass, no threshold)."""
     x = x_model.detach().reshape(-1, 3).double().numpy() / SCALE
     noise = noise_std(t) if noisy and t > 0 else None

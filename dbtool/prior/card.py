@@ -3,8 +3,8 @@
 Inputs: the two weights files (sizes, steps, training time, final loss, training config), the
 evaluation JSON of ``dbtool prior evaluate`` and, when present,
 ``benchmarks/results/legacy/prior.json``.
-Every number in the tables comes from these files; the design rationale cites the prototype
-measurements of ``notes/prior-calibration.md`` and the training-step timings of the benchmark.
+Every number in the tables comes from these files; the design rationale quotes prototype
+measurements made while the prior was designed and the training-step timings of the benchmark.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ WHY = """\
 Point-E's point-cloud models are transformers whose tokens are the points (no positional
 encoding) plus one token each for the timestep and the condition. Full self-attention over
 1,024 points cost 2.8-3.9 s per training step on this 2-core CPU
-(`notes/prior-calibration.md`), far too slow to train here. dbtool keeps the tokens and the
+(measured on a prototype), far too slow to train here. dbtool keeps the tokens and the
 permutation symmetry but routes attention through a small set of learned latents (Perceiver IO):
 the latents cross-attend to every point token plus the time and condition tokens, run
 self-attention blocks among themselves with the time and condition tokens, and every point

@@ -61,7 +61,7 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
              interpolate: bool = True, progress=print, reference_families: list[str] | None
              = None, eta: float = 1.0, heldout_per_family: int = HELDOUT_PER_FAMILY,
              metric_points: int = METRIC_POINTS) -> dict:
-    """All quality metrics of the issue; numbers per family and overall.
+    """All quality metrics of the model card; numbers per family and overall.
 
     ``families`` are the families prompted; the reference set covers ``reference_families``
     (default: every family), so a sample can be mistaken for any of them. The ceiling is the

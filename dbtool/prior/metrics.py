@@ -1,9 +1,9 @@
 """Quality metrics of the prior: Chamfer distance, 1-NN family accuracy, 1-NNA diversity.
 
-* Prompt fidelity (issue acceptance): a generated cloud is correct when its single nearest
+* Prompt fidelity (the model card's headline): a generated cloud is correct when its single nearest
   reference shape (Chamfer) belongs to the prompted family. The same rule applied to real
-  held-out shapes is the metric's ceiling. (A mean-distance-to-family rule is a poor judge:
-  ``notes/prior-calibration.md``.)
+  held-out shapes is the metric's ceiling. (A mean-distance-to-family rule judged a prototype's
+  samples poorly.)
 * Diversity: the 1-nearest-neighbour two-sample accuracy (1-NNA) of generated vs held-out real
   shapes of one family: 0.5 means indistinguishable sets, 1.0 fully separable (collapse or a
   systematic bias); plus the spread (mean pairwise Chamfer) of generated vs real clouds.

@@ -3,7 +3,7 @@
 Point-E's models (SPEC section 1) are transformers over the points: each point is a token (no
 positional encoding), the timestep and the condition are extra tokens, the output is epsilon per
 point. Full self-attention over 1,024 points costs 2.8-3.9 s per training step on this CPU
-(``notes/prior-calibration.md``), so dbtool routes attention through a small set of learned
+(``MODEL_CARD.md``), so dbtool routes attention through a small set of learned
 latents (Perceiver IO): the latents read every token (cross-attention), think among themselves
 together with the time and condition tokens (self-attention), and every point reads the latents
 back. The cost is linear in the number of points and the network is exactly permutation

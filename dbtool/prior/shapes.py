@@ -4,7 +4,7 @@ Each family builds a watertight solid with manifold3d from random parameters; th
 sampled with trimesh. Shapes are built z-up (manifold3d's extrusion axis) and turned to the
 simulator's y-up frame, then centred on their bounding box and scaled so the largest side is 1:
 every cloud lies in ``[-0.5, 0.5]^3``. Orientation is canonical (no random yaw): Chamfer-based
-metrics and the diffusion model both profit from it (``notes/prior-calibration.md``).
+metrics and the diffusion model both profit from it (measured on a prototype).
 
 Everything is deterministic given a seed: shape ``i`` of family ``f`` in split ``s`` uses the
 generator ``default_rng((seed, SPLITS[s], f, i))``.

@@ -5,7 +5,7 @@ condition dropped with p = 0.1); the upsampler learns the other 3,072 points of 
 cloud given 1,024 of them (linear schedule, no text: the coarse cloud carries the shape). Each
 step trains on a random subset of ``subset`` points per cloud: the model's cost is linear in the
 points and a subset-trained model samples full clouds just as well
-(``notes/prior-calibration.md``). Mixed precision uses bfloat16 autocast (the CPU's AMX units).
+(measured on a prototype). Mixed precision uses bfloat16 autocast (the CPU's AMX units).
 
 A run directory holds ``config.json``, ``manifest.json``, ``metrics.jsonl`` (the loss log) and
 ``checkpoint.pt`` (model, EMA, optimiser, RNG states), written atomically every
