@@ -2,14 +2,17 @@
 
 A crash or an interrupt never leaves a half-written file under the final name. The temp file
 gets the permissions a plain ``open(path, "w")`` would (``0o666`` less the umask), not the
-owner-only mode of :func:`tempfile.mkstemp`.
+owner-only mode of :func:`tempfile.mkstemp`. :func:`atomic_folder` does the same for a folder
+of files.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 
@@ -43,3 +46,33 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
 def atomic_write_text(path: str | Path, text: str) -> Path:
     """Write ``text`` to ``path`` atomically."""
     return atomic_write(path, lambda tmp: Path(tmp).write_text(text))
+
+
+@contextmanager
+def atomic_folder(path: str | Path) -> Iterator[Path]:
+    """Fill a hidden temp folder next to ``path`` (yielded), then rename it to ``path``.
+
+    An existing folder at ``path`` is replaced only once the new one is complete; an exception
+    or an interrupt inside the block removes the temp folder and leaves ``path`` as it was.
+    The folder gets the permissions of a plain ``mkdir`` (``0o777`` less the umask).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not os.access(path.parent, os.W_OK):
+        raise PermissionError(f"cannot write to {path.parent}")
+    if path.exists() and not path.is_dir():
+        raise NotADirectoryError(f"{path} is a file, not a folder")
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.partial-", dir=path.parent))
+    try:
+        os.chmod(tmp, 0o777 & ~_umask())
+        yield tmp
+        if path.exists():
+            old = path.parent / f".{path.name}.old-{os.getpid()}"
+            path.rename(old)
+            tmp.rename(path)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            tmp.rename(path)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise

@@ -1,7 +1,9 @@
-"""Export for fabrication (SPEC 8): watertight manifold parts in mm, the mirrored gripper on its
-base, tendon routing with clearance, channels, 3MF/STL round trips, atomic output folders."""
+"""Export for fabrication (docs/method.md §8): watertight manifold parts in mm, the mirrored
+gripper on its base, tendon routing with clearance, channels, 3MF/STL round trips, atomic output
+folders."""
 
 import json
+import re
 import zipfile
 from pathlib import Path
 
@@ -11,9 +13,12 @@ import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
+from dbtool.atomic import atomic_folder
 from dbtool.design import Design
 from dbtool.export.assembly import ExportConfig, build, design_volume, export_design
-from dbtool.export.mesh import wall_thickness
+from dbtool.export.mesh import OccupancyField
+from dbtool.export.report import mesh_report, wall_thickness
+from dbtool.export.threemf import write_3mf
 from dbtool.sim.robot import Robot
 from dbtool.sim.tasks import TASKS, get_task
 from dbtool.sim.tasks.gripping import FULL
@@ -22,11 +27,6 @@ from dbtool.sim.tasks.gripping import FULL
 def _finger() -> Design:
     task = get_task("gripping")
     return Design("gripping", task.reference_robot("finger"), task.controller())
-
-
-def _manifold(mesh: trimesh.Trimesh):
-    return m3.Manifold(m3.Mesh(vert_properties=np.asarray(mesh.vertices, np.float32),
-                               tri_verts=np.asarray(mesh.faces, np.uint32)))
 
 
 def _inside_with_clearance(solid, point, clearance: float) -> bool:
@@ -254,8 +254,6 @@ def test_voronoi_infill_through_export(tmp_path):
 def test_a_one_site_plate_keeps_its_volume_at_the_default_smoothing(smooth, lo, hi):
     """Why SMOOTH is 0.35: a plate one site thick (24 x 24 sites) keeps 93% of its volume;
     at 0.6 it keeps about half (docs/export.md)."""
-    from dbtool.export.mesh import OccupancyField
-
     sp = 0.0025
     g = np.stack(np.meshgrid(np.arange(24), [0], np.arange(24), indexing="ij"), -1).reshape(-1, 3)
     field = OccupancyField.from_sites((g + 0.5) * sp, np.ones(len(g), bool), sp, smooth=smooth)
@@ -266,9 +264,36 @@ def test_a_one_site_plate_keeps_its_volume_at_the_default_smoothing(smooth, lo, 
 def test_the_report_sees_a_part_as_an_stl_reader_does():
     """Two cubes touching along an edge are a valid manifold (distinct vertices at the same
     place) but not a watertight STL once a reader welds the vertices: the report says so."""
-    from dbtool.export.mesh import mesh_report
-
     cube = m3.Manifold.cube([10.0, 10.0, 10.0])
     rep = mesh_report(cube + cube.translate([10.0, 10.0, 0.0]), thickness=False)
     assert rep["manifold_status"] == "NoError" and not rep["watertight"]
     assert mesh_report(cube, thickness=False)["watertight"]
+
+
+def test_3mf_keeps_every_float32_vertex_exactly(tmp_path):
+    """3MF coordinates are written with 9 significant digits, which give back every float32 (6
+    digits moved vertices far from the origin by up to 5e-4 mm)."""
+    ball = m3.Manifold.sphere(7.0, 24).translate([123.456789, -98.7654321, 0.001234567])
+    write_3mf({"ball": ball}, tmp_path / "ball.3mf")
+    with zipfile.ZipFile(tmp_path / "ball.3mf") as z:
+        model = z.read("3D/3dmodel.model").decode()
+    coords = [float(v) for v in re.findall(r'[xyz]="([^"]+)"', model)]
+    want = np.asarray(ball.to_mesh().vert_properties, np.float32)[:, :3].ravel()
+    assert np.array_equal(np.array(coords, np.float32), want)
+
+
+def test_a_published_folder_appears_whole_or_not_at_all(tmp_path):
+    """atomic_folder: a failure inside leaves the old folder and no temp folder; a regular file
+    where the folder must go is a clear error."""
+    out = tmp_path / "out"
+    with atomic_folder(out) as tmp:
+        (tmp / "a.txt").write_text("1")
+    with pytest.raises(RuntimeError), atomic_folder(out) as tmp:
+        (tmp / "b.txt").write_text("2")
+        raise RuntimeError("stop")
+    assert [p.name for p in out.iterdir()] == ["a.txt"]
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(NotADirectoryError, match="is a file"), atomic_folder(tmp_path / "file"):
+        pass
+    assert (tmp_path / "file").read_text() == "x"

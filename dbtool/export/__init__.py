@@ -1,1 +1,1 @@
-"""Export for fabrication (SPEC section 8): watertight meshes in millimetres."""
+"""Export for fabrication (docs/method.md §8): watertight meshes in millimetres."""

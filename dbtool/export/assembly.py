@@ -1,96 +1,39 @@
-"""The export stage (SPEC section 8): a saved Design -> printable parts, an assembly, tendon
+"""The export stage (docs/method.md §8): a saved Design -> printable parts, an assembly, tendon
 routing and a fabrication report, all in millimetres.
 
 Gripping: the designed finger, its mirror copy (``Manifold.mirror``, so winding stays right) about
 the gripper's mirror plane and the rigid base plate with four mounting holes, placed as in the
 simulated gripper; one tendon per actuator group and finger (:mod:`dbtool.export.tendons`),
 optionally cut as channels. Other tasks: the body and its actuator regions as separate parts.
+The checks and the report are in :mod:`dbtool.export.report`.
 """
 
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
 import time
-from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from dbtool.atomic import _umask
+from dbtool.atomic import atomic_folder
 from dbtool.design import Design
-from dbtool.export.mesh import (
-    MM_PER_UNIT,
-    OccupancyField,
-    Voxels,
-    finish,
-    largest_component,
-    manifold3d,
-    mesh_report,
-    write_stl,
-)
-from dbtool.export.tendons import Tendon, channel_solid, mirror_tendon, route_finger
+from dbtool.export._manifold import manifold3d as m3
+from dbtool.export.config import Assembly, ExportConfig
+from dbtool.export.mesh import OccupancyField, finish, largest_component, write_stl
+from dbtool.export.report import design_volume, report, report_markdown
+from dbtool.export.tendons import channel_solid, mirror_tendon, route_finger
 from dbtool.export.threemf import write_3mf
+from dbtool.export.voxels import Voxels
 from dbtool.runs import write_json
 from dbtool.sim.tasks import get_task
 from dbtool.sim.tasks.base import DX, SPACING
 from dbtool.sim.tasks.gripping import BASE, FULL
 
+__all__ = ["Assembly", "ExportConfig", "build", "design_volume", "export_design",
+           "report_markdown"]
+
 INSET = 0.2  # mm between a finger and the sides of the workspace (and base)
 GLUE = 0.05  # mm of overlap that fuses the fingers to the plate in ``assembly``
-
-
-@dataclass
-class ExportConfig:
-    """Settings of ``dbtool export``; lengths in mm."""
-
-    scale_mm: float = MM_PER_UNIT  # mm per simulation unit: a 60 x 72.5 x 42.5 mm finger
-    stl: bool = True
-    threemf: bool = True
-    channels: bool = False  # cut the tendon channels into fingers and base
-    channel_diameter: float = 1.5  # a PTFE tube's bore for a braided line
-    min_wall: float = 1.0  # material kept around a channel
-    mount_hole: float = 3.4  # M3 clearance holes in the base
-    infill: str = "none"  # none | voronoi
-    shell: float = 1.2  # solid skin around the Voronoi foam
-    pitch: float = 0.5  # voxel pitch (mm) of the depth field that places routing points
-
-    @property
-    def radius(self) -> float:
-        return 0.5 * self.channel_diameter
-
-
-@dataclass
-class Assembly:
-    parts: dict  # name -> manifold (mm), printable parts only
-    union: object  # all parts fused (one body for the gripper)
-    tendons: list[Tendon]
-    design_volume_mm3: float  # the largest connected piece of the design (what is meshed)
-    body_volume_mm3: float  # the meshed body before channels and infill
-    timings: dict
-    infill: dict
-    notes: dict = field(default_factory=dict)
-
-
-def design_volume(design: Design, scale: float, largest: bool = False) -> float:
-    """The design's solid volume: active lattice sites x spacing^3, in mm^3; ``largest``: of
-    its largest connected piece only (sites touching by a face, edge or corner), the piece the
-    export keeps."""
-    robot = design.robot
-    active = robot.active()
-    n = int(active.sum())
-    if largest and n:
-        from scipy.ndimage import label
-
-        idx = np.round(robot.points[active] / SPACING - 0.5).astype(int)
-        idx -= idx.min(0)
-        grid = np.zeros(idx.max(0) + 1, bool)
-        grid[tuple(idx.T)] = True
-        lab, k = label(grid, structure=np.ones((3, 3, 3)))
-        if k > 1:
-            n = int(np.bincount(lab[grid]).max())
-    return float(n) * (SPACING * scale) ** 3
 
 
 def _fields(design: Design, scale: float, extrude_top: int = 0
@@ -172,7 +115,6 @@ def _pillar_fill(design: Design, scale: float, boxes: np.ndarray | None, top: fl
 
 
 def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
-    m3 = manifold3d()
     s = cfg.scale_mm
     t0 = time.perf_counter()
     body, regions, gap = _fields(design, s, extrude_top=3)
@@ -296,12 +238,7 @@ def export_design(design: Design, out_dir: Path, cfg: ExportConfig | None = None
     out_dir = Path(out_dir)
     name = name or out_dir.name
     asm = build(design, cfg)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    if not os.access(out_dir.parent, os.W_OK):
-        raise PermissionError(f"cannot write to {out_dir.parent}")
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
-    try:
-        os.chmod(tmp, 0o777 & ~_umask())
+    with atomic_folder(out_dir) as tmp:
         files = []
         t0 = time.perf_counter()
         for part, solid in asm.parts.items():
@@ -325,94 +262,4 @@ def export_design(design: Design, out_dir: Path, cfg: ExportConfig | None = None
             from dbtool.export.drawing import draw_tendons
 
             draw_tendons(asm, tmp / "tendons.png", title=name)
-        if out_dir.exists():
-            old = out_dir.parent / f".{out_dir.name}.old-{os.getpid()}"
-            out_dir.rename(old)
-            tmp.rename(out_dir)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            tmp.rename(out_dir)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return rep
-
-
-def report(design: Design, asm: Assembly, cfg: ExportConfig, name: str, files: list) -> dict:
-    """``report.json``: per part the checks of :func:`mesh_report`, the volume against the
-    design's solid volume x scale^3, and the tendons' clearances (SPEC 8)."""
-    parts = {k: mesh_report(v) for k, v in asm.parts.items()}
-    if design.task == "gripping":
-        parts["assembly"] = mesh_report(asm.union, thickness=False)
-    main = "finger" if design.task == "gripping" else "body"
-    rep = {
-        "design": name, "task": design.task, "units": "mm", "mm_per_sim_unit": cfg.scale_mm,
-        "config": asdict(cfg), "files": files, "parts": parts,
-        "volume_check": {
-            "part": main, "design_solid_mm3": asm.design_volume_mm3,
-            "mesh_mm3": asm.body_volume_mm3,
-            # the gripper's root pillars fill empty cells on purpose: compare against both
-            "ratio": asm.body_volume_mm3 / (asm.design_volume_mm3
-                                            + asm.notes.get("root_pillar_fill_mm3", 0.0)),
-            "design_total_mm3": design_volume(design, cfg.scale_mm),  # loose pieces included
-        },
-        "timings_s": {k: round(v, 3) for k, v in asm.timings.items()},
-        **asm.notes,
-        "metrics": design.metrics,
-    }
-    if asm.tendons:
-        rep["tendons"] = {
-            "count": len(asm.tendons), "points_per_tendon": len(asm.tendons[0].points),
-            "channel_radius_mm": cfg.radius, "min_wall_mm": cfg.min_wall,
-            "min_point_depth_mm": min(min(t.depth_mm) for t in asm.tendons),
-            "channel_clearance_mm": min(t.clearance_mm for t in asm.tendons),
-            "all_points_clear": all(t.ok for t in asm.tendons),
-        }
-    if asm.infill:
-        rep["infill"] = asm.infill
-    return rep
-
-
-def report_markdown(rep: dict) -> str:
-    """A short human-readable ``report.md``."""
-    lines = [f"# Fabrication report: {rep['design']}", "",
-             f"Task {rep['task']}; units mm ({rep['mm_per_sim_unit']:g} mm per simulation unit).",
-             "", "| part | watertight | volume | bodies | genus | volume (mm³) | "
-                 "bounding box (mm) | thinnest wall (mm) |",
-             "| --- | --- | --- | ---: | ---: | ---: | --- | ---: |"]
-    for k, p in rep["parts"].items():
-        wall = f"{p['min_wall_mm']:.2f}" if "min_wall_mm" in p else "–"
-        box = " × ".join(f"{v:.1f}" for v in p["bbox_mm"])
-        lines.append(f"| {k} | {p['watertight']} | {p['is_volume']} | {p['bodies']} | "
-                     f"{p['genus']} | {p['volume_mm3']:.0f} | {box} | {wall} |")
-    v = rep["volume_check"]
-    fill = rep.get("root_pillar_fill_mm3", 0.0)
-    plus = f" plus {fill:.0f} mm³ of root cells the pillars fill" if fill > 0 else ""
-    lines += ["", f"Meshed {v['part']} {v['mesh_mm3']:.0f} mm³ against the design's solid "
-                  f"{v['design_solid_mm3']:.0f} mm³{plus} (ratio {v['ratio']:.3f}). The thinnest "
-                  "wall is the shortest ray from a face, along its inward normal, through the "
-                  "part."]
-    if rep.get("root_gap_mm", 0) > 0:
-        lines += ["", f"The design's top sites stop {rep['root_gap_mm']:.2f} mm below the base "
-                      "(the simulator's grid joins them across it); the export fills that gap "
-                      f"with {rep['root_bridge_mm3']:.0f} mm³ so the finger meets the base."]
-    dropped = v["design_total_mm3"] - v["design_solid_mm3"]
-    if dropped > 0:
-        lines += ["", f"**Loose pieces dropped:** {dropped:.0f} mm³ of the design "
-                      f"({dropped / v['design_total_mm3']:.1%}) is not connected to its largest "
-                      "piece and was left out."]
-    if "tendons" in rep:
-        t = rep["tendons"]
-        lines += ["", f"Tendons: {t['count']} ({t['points_per_tendon']} routing points each), "
-                      f"channel radius {t['channel_radius_mm']} mm, routing points at least "
-                      f"{t['min_point_depth_mm']:.2f} mm deep (needed "
-                      f"{t['channel_radius_mm'] + t['min_wall_mm']:.2f}); thinnest wall around "
-                      f"a channel along the paths {t['channel_clearance_mm']:.2f} mm; all points "
-                      f"clear: {t['all_points_clear']}. Channels cut: "
-                      f"{rep['config']['channels']}."]
-    if "infill" in rep:
-        i = rep["infill"]
-        lines += ["", f"Voronoi infill: relative density {i['relative_density']:.3f} "
-                      f"(seed spacing {i['spacing_mm']} mm, beams {i['beam_mm']} mm, shell "
-                      f"{i['shell_mm']} mm), built in {i['seconds']:.1f} s."]
-    return "\n".join(lines) + "\n"

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from dbtool.atomic import atomic_write
+from dbtool.export._manifold import mesh_arrays
 
 COLOURS = {"flexion": "tab:red", "extension": "tab:blue"}
 PART_COLOURS = {"base": "0.55", "finger": "tab:orange", "finger_mirror": "tab:olive"}
@@ -16,9 +17,8 @@ def _silhouette(ax, solid, axes: tuple[int, int], colour) -> None:
     """Fill the projection of a part's triangles onto ``axes`` (front faces only)."""
     from matplotlib.collections import PolyCollection
 
-    mesh = solid.to_mesh()
-    v = np.asarray(mesh.vert_properties)[:, :3]
-    tri = v[np.asarray(mesh.tri_verts)][:, :, list(axes)]
+    v, t = mesh_arrays(solid)
+    tri = v[t][:, :, list(axes)]
     e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
     front = (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) > 0
     ax.add_collection(PolyCollection(tri[front], facecolors=colour, edgecolors="none",

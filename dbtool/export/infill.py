@@ -1,4 +1,4 @@
-"""Voronoi lattice foam infill of a printable part (SPEC section 8, the paper's appendix G).
+"""Voronoi lattice foam infill of a printable part (docs/method.md §8, the paper's appendix G).
 
 The paper's physical gripper fingers were infilled with a Voronoi lattice foam (seed point
 spacing 2.5 mm, beam thickness 0.4 mm) to soften them. :func:`voronoi_infill` rebuilds a part as
@@ -6,7 +6,8 @@ a solid skin (``shell`` mm thick) around such a foam and returns one watertight 
 
 1. The inner region (the part eroded by ``shell``) is the ``shell`` level set, meshed by
    marching tetrahedra (:mod:`dbtool.export.isosurface`), of a signed distance field: the part
-   is voxelised slice by slice (winding numbers of its cross-sections, no ray casting) and
+   is voxelised slice by slice (:mod:`dbtool.export.voxels`: winding numbers of its
+   cross-sections, no ray casting) and
    ``scipy.ndimage.distance_transform_edt`` gives the distance. skin = part - inner region.
 2. Seeds on a body-centred cubic grid jittered by +-10 % of its cell (one seed per
    ``spacing**3``, reproducible from ``seed``; a near-Kelvin foam with few very short edges).
@@ -22,10 +23,10 @@ a solid skin (``shell`` mm thick) around such a foam and returns one watertight 
    skin, foam islands not joined to it are dropped and pockets closed off between beams and
    the skin are filled.
 5. A drain hole (``drain`` mm wide) is drilled through the skin at the cavity's lowest point
-   (-z), along the shortest way out. A DLP print (SPEC 8: EPU 40) must let uncured resin out of
-   the foam, and only the hole joins the outer skin's surface to the foam's, so that the part
-   is one connected surface (``len(decompose()) == 1``). With ``drain=0`` the skin is sealed and
-   the outer surface and the cavity's are two surfaces of one solid.
+   (-z), along the shortest way out. A DLP print (docs/method.md §8: EPU 40) must let uncured
+   resin out of the foam, and only the hole joins the outer skin's surface to the foam's, so
+   that the part is one connected surface (``len(decompose()) == 1``). With ``drain=0`` the
+   skin is sealed and the outer surface and the cavity's are two surfaces of one solid.
 """
 
 from __future__ import annotations
@@ -36,26 +37,32 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dbtool.export._manifold import from_arrays, mesh_arrays
+from dbtool.export._manifold import manifold3d as m3
 from dbtool.export.isosurface import marching_tetrahedra
-from dbtool.export.lattice import _EPS, _frames, _Lattice, _pieces, _sample_segments, _seg_dist
-from dbtool.export.mesh import manifold3d
+from dbtool.export.lattice import (
+    EPS,
+    Lattice,
+    foam_pieces,
+    frames,
+    sample_segments,
+    segment_distance,
+)
+from dbtool.export.voxels import Voxels
 
 _JITTER = 0.1  # seed displacement, fraction of the body-centred cubic cell (each axis, +-)
 
 
 @dataclass
 class InfillConfig:
-    """Voronoi foam settings in mm; spacing and beam are the paper's values (SPEC 8)."""
+    """Voronoi foam settings in mm; spacing and beam are the paper's values (docs/method.md §8)."""
 
-    spacing: float = 2.5  # mm between Voronoi seeds (SPEC 8): one seed per spacing**3
-    beam: float = 0.4  # mm beam thickness (SPEC 8): the prisms' width across flats
+    spacing: float = 2.5  # mm between Voronoi seeds: one seed per spacing**3
+    beam: float = 0.4  # mm beam thickness: the prisms' width across flats
     shell: float = 1.2  # mm solid skin kept around the foam (a setting, not from the paper)
     seed: int = 0  # RNG seed of the seed points (reproducible)
     segments: int = 6  # facets of each beam's cross-section
     drain: float = 2.0  # mm diameter of a resin drain hole through the skin (0: sealed skin)
-
-
-_m3 = manifold3d  # one import guard for the export package
 
 
 # --------------------------------------------------------------------------- distance field
@@ -77,52 +84,14 @@ class _Field:
         return map_coordinates(self.sdf, u.T, order=1, mode="constant", cval=-1e3)
 
 
-def _inside_mask(solid, origin: np.ndarray, pitch: float, shape) -> np.ndarray:
-    """Which voxel centres lie inside ``solid``: per z layer, the winding number of the
-    cross-section's contours along +x rays, counted with numpy (no ray casting, no rtree)."""
-    nx, ny, nz = shape
-    xs = origin[0] + pitch * np.arange(nx)
-    ys = origin[1] + pitch * np.arange(ny)
-    inside = np.zeros(shape, bool)
-    for k in range(nz):
-        polys = solid.slice(float(origin[2] + pitch * k)).to_polygons()
-        if not polys:
-            continue
-        p0 = np.concatenate([np.asarray(p, float) for p in polys])
-        p1 = np.concatenate([np.roll(np.asarray(p, float), -1, axis=0) for p in polys])
-        lo, hi = np.minimum(p0[:, 1], p1[:, 1]), np.maximum(p0[:, 1], p1[:, 1])
-        e, j = np.nonzero((lo[:, None] <= ys[None, :]) & (ys[None, :] < hi[:, None]))
-        if len(e) == 0:
-            continue
-        a, b = p0[e], p1[e]
-        xc = a[:, 0] + (ys[j] - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
-        sign = np.where(b[:, 1] > a[:, 1], 1, -1)
-        # a crossing at xc counts for every voxel centre left of it: index searchsorted(xs, xc)
-        acc = np.zeros((ny, nx + 1), int)
-        np.add.at(acc, (j, np.searchsorted(xs, xc)), sign)
-        wind = np.cumsum(acc[:, ::-1], axis=1)[:, ::-1][:, 1:]
-        inside[:, :, k] = (wind > 0).T
-    return inside
-
-
 def _distance_field(solid, pitch: float, pad: int = 3) -> _Field:
     """Signed distance (voxel estimate, error below about one ``pitch``) of a manifold."""
-    from scipy.ndimage import distance_transform_edt
-
-    box = np.asarray(solid.bounding_box(), float)
-    # a small irrational offset keeps voxel centres off axis-aligned faces
-    origin = box[:3] - pad * pitch + pitch * (0.5 + 1e-3 * math.sqrt(2))
-    shape = tuple(int(n) for n in np.ceil((box[3:] - origin) / pitch).astype(int) + pad + 1)
-    inside = _inside_mask(solid, origin, pitch, shape)
-    d_in = distance_transform_edt(inside, sampling=pitch)
-    d_out = distance_transform_edt(~inside, sampling=pitch)
-    sdf = np.where(inside, d_in - 0.5 * pitch, 0.5 * pitch - d_out)
-    return _Field(sdf.astype(np.float64), origin, pitch)
+    vox = Voxels.of(solid, pitch, pad)
+    return _Field(vox.signed_distance().astype(np.float64), vox.origin, pitch)
 
 
 def _inner_region(field: _Field, shell: float):
     """The part eroded by ``shell``: the ``shell`` level set of the distance field."""
-    m3 = _m3()
     keep = np.argwhere(field.sdf > shell)
     if len(keep) == 0:
         return m3.Manifold()
@@ -192,7 +161,7 @@ def _contract_short(verts: np.ndarray, edges: np.ndarray, min_len: float):
 def _drain_hole(inner, field: _Field, diameter: float, reach: float):
     """A cylinder through the skin from the cavity's lowest point (-z) along the distance
     field's steepest descent (the shortest way out), ``reach`` mm into the cavity."""
-    v = np.asarray(inner.to_mesh().vert_properties, float)[:, :3]
+    v = np.asarray(mesh_arrays(inner)[0], float)
     low = v[v[:, 2] <= v[:, 2].min() + field.pitch]
     c = low[np.argmin(np.linalg.norm(low - low.mean(0), axis=1))]
     h = field.pitch
@@ -206,10 +175,9 @@ def _drain_hole(inner, field: _Field, diameter: float, reach: float):
 
 def _cylinder(a: np.ndarray, b: np.ndarray, radius: float, segments: int):
     """A cylinder from a to b (manifold3d's run along +z from the origin)."""
-    m3 = _m3()
     v = b - a
     length = float(np.linalg.norm(v))
-    p, q = _frames((v / length)[None])
+    p, q = frames((v / length)[None])
     rot = np.column_stack([p[0], q[0], v / length, a])  # (p, q, u) right-handed: a rotation
     return m3.Manifold.cylinder(length, radius, radius, segments).transform(rot.tolist())
 
@@ -220,7 +188,6 @@ def _clean(body, cavity: float):
     between beams and the skin (inverted, negative volume; they would trap resin) are separate
     ones. Dropping a pocket's surface fills it. An inverted surface enclosing more than
     ``cavity`` mm3 is a foam cavity (a sealed skin, or a drain that missed it) and stays."""
-    m3 = _m3()
     parts = body.decompose()
     if len(parts) == 1:
         return body, 1
@@ -230,14 +197,11 @@ def _clean(body, cavity: float):
         return keep[0], 1
     verts, tris, nv = [], [], 0
     for m in keep:
-        mesh = m.to_mesh64()
-        v = np.asarray(mesh.vert_properties)[:, :3]
+        v, t = mesh_arrays(m, double=True)
         verts.append(v)
-        tris.append(np.asarray(mesh.tri_verts) + nv)
+        tris.append(t + nv)
         nv += len(v)
-    out = m3.Manifold(m3.Mesh64(np.array(np.vstack(verts), np.float64),
-                                np.ascontiguousarray(np.vstack(tris), np.uint64)))
-    return out, len(keep)
+    return from_arrays(np.vstack(verts), np.vstack(tris)), len(keep)
 
 
 # --------------------------------------------------------------------------- the infill
@@ -270,8 +234,8 @@ def _thin(cfg: InfillConfig) -> ValueError:
 
 def voronoi_infill(solid, cfg: InfillConfig | None = None) -> tuple[object, dict]:
     """Replace the inside of ``solid`` (a ``manifold3d.Manifold`` in mm) by a Voronoi lattice
-    foam (SPEC 8 / appendix G: seed spacing 2.5 mm, beams 0.4 mm) inside a skin of thickness
-    ``cfg.shell``; returns (one watertight body, info).
+    foam (docs/method.md §8 / appendix G: seed spacing 2.5 mm, beams 0.4 mm) inside a skin of
+    thickness ``cfg.shell``; returns (one watertight body, info).
 
     info: relative_density (result / solid volume), foam_relative_density (foam volume in the
     inner region / its volume), shell_fraction (skin / solid volume), seeds (in the foam
@@ -280,7 +244,6 @@ def voronoi_infill(solid, cfg: InfillConfig | None = None) -> tuple[object, dict
     seconds, volume_mm3. Raises ValueError on an empty solid,
     bad settings, or a part thinner than 2 x shell (no room for foam).
     """
-    m3 = _m3()
     cfg = InfillConfig() if cfg is None else cfg
     t0 = time.perf_counter()
     _check(solid, cfg)
@@ -313,32 +276,33 @@ def voronoi_infill(solid, cfg: InfillConfig | None = None) -> tuple[object, dict
     if not keep.any():  # pragma: no cover - the inner region exists, so some edge crosses it
         raise _thin(cfg)
     nodes, e = _contract_short(verts, edges[keep], 2.5 * r)
-    lat = _Lattice.build(nodes, e, r, seg)
+    lat = Lattice.build(nodes, e, r, seg)
     nn, ne = len(nodes), len(e)
 
     # 3. pieces that may leave the part (or enter the drain) are clipped by a boolean
     step = r
-    pts, owner = _sample_segments(lat.seg_a, lat.seg_b, step)
-    margin = 1.5 * pitch + 0.5 * step + _EPS  # the field's error plus the sampling gap
+    pts, owner = sample_segments(lat.seg_a, lat.seg_b, step)
+    margin = 1.5 * pitch + 0.5 * step + EPS  # the field's error plus the sampling gap
     low = np.full(ne, np.inf)
     np.minimum.at(low, owner, field.sample(pts))
     beam_safe = low >= lat.big_r + margin
     node_safe = field.sample(nodes) >= lat.rho + margin
     if hole is not None:
         ha, hb = hole
-        reach = 0.5 * cfg.drain + _EPS
-        d = _seg_dist(pts, pts, np.broadcast_to(ha, pts.shape), np.broadcast_to(hb, pts.shape))
+        reach = 0.5 * cfg.drain + EPS
+        d = segment_distance(pts, pts, np.broadcast_to(ha, pts.shape),
+                             np.broadcast_to(hb, pts.shape))
         near_hole = np.zeros(ne, bool)
         near_hole[owner[d < reach + lat.big_r + 0.5 * step]] = True
         beam_safe &= ~near_hole
-        d = _seg_dist(nodes, nodes, np.broadcast_to(ha, nodes.shape),
-                      np.broadcast_to(hb, nodes.shape))
+        d = segment_distance(nodes, nodes, np.broadcast_to(ha, nodes.shape),
+                             np.broadcast_to(hb, nodes.shape))
         node_safe &= d >= reach + lat.rho
 
     # 4. stitch what is clean into one mesh: node hulls whose rings are all faces, beams whose
     #    ends replace those faces; everything else is fused by booleans (groups of disjoint
     #    pieces from a greedy colouring of the conflict graph)
-    stitched_mesh, groups, beam_ok = _pieces(lat, node_safe, beam_safe, step)
+    stitched_mesh, groups, beam_ok = foam_pieces(lat, node_safe, beam_safe, step)
     parts = [shell] + ([stitched_mesh] if stitched_mesh is not None else []) + groups[True]
     if groups[False]:
         parts.append(m3.Manifold.batch_boolean(groups[False], m3.OpType.Add) ^ keep_in)

@@ -1,4 +1,5 @@
-"""Level set of a sampled scalar field -> manifold solid, by marching tetrahedra (SPEC section 8).
+"""Level set of a sampled scalar field -> manifold solid, by marching tetrahedra
+(docs/method.md §8).
 
 Each grid cube is split into the six Kuhn tetrahedra around its main diagonal (the same split in
 every cube, so neighbouring cubes' faces match). Inside a tetrahedron the trilinear field is
@@ -11,6 +12,8 @@ manifold3d's constructor checks it again.
 
 This replaces ``Manifold.level_set``: manifold3d 3.5.4 crashes (SIGSEGV inside
 ``CreateLevelSet``) on some of our fields, and a mesher in numpy never calls back into Python.
+One such field is kept in ``tests/data/level_set_crash.npz``; ``tests/test_isosurface.py`` runs
+``level_set`` on it in a subprocess and says when a manifold3d release meshes it.
 """
 
 from __future__ import annotations
@@ -18,6 +21,8 @@ from __future__ import annotations
 from itertools import permutations
 
 import numpy as np
+
+from dbtool.export._manifold import manifold3d as m3
 
 _CORNERS = np.array([(i, j, k) for i in (0, 1) for j in (0, 1) for k in (0, 1)])
 SIMPLIFY = 0.01  # collapse edges shorter than this fraction of the pitch (slivers near nodes)
@@ -80,9 +85,6 @@ def marching_tetrahedra(values: np.ndarray, origin, pitch: float):
     The outermost layer of the grid is treated as outside, so the surface is always closed.
     Returns an empty Manifold when nothing is inside.
     """
-    from dbtool.export.mesh import manifold3d
-
-    m3 = manifold3d()
     v = np.asarray(values, np.float64).copy()
     if v.ndim != 3 or min(v.shape) < 3:
         raise ValueError(f"need a 3-d grid of at least 3 samples per axis, got {v.shape}")

@@ -1,8 +1,10 @@
 """Beams and nodes of the Voronoi lattice foam as manifold3d meshes (used by
-:mod:`dbtool.export.infill`).
+:mod:`dbtool.export.infill`; docs/method.md §8).
 
-:func:`_pieces` turns the foam's graph (Voronoi vertices as nodes, the edges between them as
-beams, built into a :class:`_Lattice`) into watertight pieces:
+The interface: :class:`Lattice` (``Lattice.build``), :func:`foam_pieces`, and the geometry
+helpers :func:`frames`, :func:`segment_distance`, :func:`sample_segments` and ``EPS``.
+:func:`foam_pieces` turns the foam's graph (Voronoi vertices as nodes, the edges between them as
+beams, built into a :class:`Lattice`) into watertight pieces:
 
 1. Each beam is a prism of ``segments`` facets whose width across flats is ``beam`` (no section
    is thinner); each Voronoi vertex a node, the convex hull of its beams' end rings, set far
@@ -25,17 +27,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dbtool.export.mesh import manifold3d
+from dbtool.export._manifold import from_arrays, mesh_arrays
+from dbtool.export._manifold import manifold3d as m3
 
-_EPS = 1e-3  # mm: pieces closer than this are treated as touching (united, never composed)
-
-_m3 = manifold3d  # one import guard for the export package
+EPS = 1e-3  # mm: pieces closer than this are treated as touching (united, never composed)
 
 
 # --------------------------------------------------------------------------- lattice geometry
 
 
-def _frames(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def frames(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit vectors p, q with (p, q, u) a right-handed orthonormal frame, per row of u."""
     h = np.where(np.abs(u[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     p = np.cross(u, h)
@@ -43,7 +44,7 @@ def _frames(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return p, np.cross(u, p)
 
 
-def _seg_dist(p1, q1, p2, q2) -> np.ndarray:
+def segment_distance(p1, q1, p2, q2) -> np.ndarray:
     """Distance between segments [p1, q1] and [p2, q2], row by row (Ericson's closest points;
     a zero-length segment is a point)."""
     d1, d2, w = q1 - p1, q2 - p2, p1 - p2
@@ -63,7 +64,7 @@ def _seg_dist(p1, q1, p2, q2) -> np.ndarray:
     return np.linalg.norm(p1 + d1 * s[:, None] - p2 - d2 * t[:, None], axis=1)
 
 
-def _sample_segments(p0: np.ndarray, p1: np.ndarray, step: float):
+def sample_segments(p0: np.ndarray, p1: np.ndarray, step: float):
     """Points at most ``step`` apart along each segment, ends included; (points, owner)."""
     n = np.ceil(np.linalg.norm(p1 - p0, axis=1) / step).astype(int) + 1
     owner = np.repeat(np.arange(len(p0)), n)
@@ -73,7 +74,7 @@ def _sample_segments(p0: np.ndarray, p1: np.ndarray, step: float):
 
 
 @dataclass
-class _Lattice:
+class Lattice:
     """Beams (edges e of nodes) as prisms of circumradius ``big_r`` (so the flat-to-flat width is
     the beam diameter) and nodes as convex hulls of the beams' end rings.
 
@@ -104,14 +105,14 @@ class _Lattice:
         return 2 * len(self.e) * self.seg + 6 * len(self.nodes)
 
     @classmethod
-    def build(cls, nodes: np.ndarray, e: np.ndarray, r: float, seg: int) -> _Lattice:
+    def build(cls, nodes: np.ndarray, e: np.ndarray, r: float, seg: int) -> Lattice:
         big_r = r / math.cos(math.pi / seg)
         delta = 0.3 * r
         nn, ne = len(nodes), len(e)
         a, b = nodes[e[:, 0]], nodes[e[:, 1]]
         length = np.linalg.norm(b - a, axis=1)
         u = (b - a) / length[:, None]
-        p, q = _frames(u)
+        p, q = frames(u)
         he_node = e.ravel()
         he_dir = np.stack([u, -u], 1).reshape(-1, 3)
         # ring distance: beyond t = big_r cot(angle / 2) (every pair of beams at the node) the
@@ -174,24 +175,22 @@ class _Lattice:
                    seg_b, rho, ext)
 
 
-def _hulls(lat: _Lattice) -> tuple[list, np.ndarray, dict]:
+def _hulls(lat: Lattice) -> tuple[list, np.ndarray, dict]:
     """Each node's convex hull as triangles of point ids, which half-edge rings are exact hull
     faces (the hull triangles with all corners on the ring tile the ring polygon, facing out), and
     the hulls whose vertices could not be matched to point ids (kept as manifolds)."""
-    m3 = _m3()
     seg, ne = lat.seg, len(lat.e)
     tris, bad = [], {}
     for i, ids in enumerate(lat.node_ids):
         pts = lat.points[ids]
         hull = m3.Manifold.hull_points(pts)
-        mesh = hull.to_mesh64()
-        vo = np.asarray(mesh.vert_properties)[:, :3]
+        vo, hull_tris = mesh_arrays(hull, double=True)
         eq = (vo[:, None, :] == pts[None]).all(2)
         if not eq.any(1).all():  # pragma: no cover - a hull vertex that is not an input point
             bad[i] = hull
             tris.append(np.zeros((0, 3), np.int64))
             continue
-        tris.append(ids[eq.argmax(1)][np.asarray(mesh.tri_verts, np.int64)])
+        tris.append(ids[eq.argmax(1)][np.asarray(hull_tris, np.int64)])
     label = np.full(len(lat.points), -1)
     label[:2 * ne * seg] = np.repeat(np.arange(2 * ne), seg)
     allt = np.concatenate(tris)
@@ -211,26 +210,27 @@ def _hulls(lat: _Lattice) -> tuple[list, np.ndarray, dict]:
     return tris, ring_ok, bad
 
 
-def _conflicts(lat: _Lattice, step: float) -> tuple[np.ndarray, np.ndarray]:
+def _conflicts(lat: Lattice, step: float) -> tuple[np.ndarray, np.ndarray]:
     """Pairs of pieces (nodes 0..nn-1, then beams) that may overlap: (accidental, designed).
 
     Designed: a node and its own beams (they overlap by construction, or are stitched).
     Accidental: anything else whose bounding balls (nodes) / capsules (beams) come closer than
-    _EPS, unless a plane separates them: two beams of one node beyond ``big_r cot(angle / 2)``
+    EPS, unless a plane separates them: two beams of one node beyond ``big_r cot(angle / 2)``
     (the bisecting plane), two neighbouring nodes whose hulls end before meeting."""
     from scipy.spatial import cKDTree
 
     nodes, rho, big_r = lat.nodes, lat.rho, lat.big_r
     sa, sb, e = lat.seg_a, lat.seg_b, lat.e
     nn, ne = len(nodes), len(e)
-    pts, owner = _sample_segments(sa, sb, step)
+    pts, owner = sample_segments(sa, sb, step)
     tree = cKDTree(pts)
     acc = []
     # beam - beam: the nearest samples lie within step of the closest points
-    pr = tree.query_pairs(2 * big_r + step + _EPS, output_type="ndarray")
+    pr = tree.query_pairs(2 * big_r + step + EPS, output_type="ndarray")
     pr = np.unique(np.sort(owner[pr], 1), axis=0)
     pr = pr[pr[:, 0] != pr[:, 1]]
-    close = _seg_dist(sa[pr[:, 0]], sb[pr[:, 0]], sa[pr[:, 1]], sb[pr[:, 1]]) < 2 * big_r + _EPS
+    close = (segment_distance(sa[pr[:, 0]], sb[pr[:, 0]], sa[pr[:, 1]], sb[pr[:, 1]])
+             < 2 * big_r + EPS)
     pr = pr[close]
     sep = np.zeros(len(pr), bool)
     for i_end in (0, 1):
@@ -239,28 +239,28 @@ def _conflicts(lat: _Lattice, step: float) -> tuple[np.ndarray, np.ndarray]:
             hi, hj = 2 * pr[shared, 0] + i_end, 2 * pr[shared, 1] + j_end
             cos = np.clip((lat.he_dir[hi] * lat.he_dir[hj]).sum(1), -1.0, 1.0)
             half = 0.5 * np.arccos(cos)
-            need = big_r * np.cos(half) / np.maximum(np.sin(half), 1e-9) + _EPS
+            need = big_r * np.cos(half) / np.maximum(np.sin(half), 1e-9) + EPS
             sep[shared] = (lat.t[hi] - lat.delta > need) & (lat.t[hj] - lat.delta > need)
     acc.append(pr[~sep] + nn)
     # node - beam (not its own)
-    hits = tree.query_ball_point(nodes, rho + big_r + 0.5 * step + _EPS)
+    hits = tree.query_ball_point(nodes, rho + big_r + 0.5 * step + EPS)
     cnt = np.fromiter((len(h) for h in hits), int, nn)
     ns = np.stack([np.repeat(np.arange(nn), cnt),
                    owner[np.fromiter((s for h in hits for s in h), int, int(cnt.sum()))]], 1)
     ns = np.unique(ns, axis=0)
     ns = ns[(e[ns[:, 1], 0] != ns[:, 0]) & (e[ns[:, 1], 1] != ns[:, 0])]
-    d = _seg_dist(nodes[ns[:, 0]], nodes[ns[:, 0]], sa[ns[:, 1]], sb[ns[:, 1]])
-    ns = ns[d < rho[ns[:, 0]] + big_r + _EPS]
+    d = segment_distance(nodes[ns[:, 0]], nodes[ns[:, 0]], sa[ns[:, 1]], sb[ns[:, 1]])
+    ns = ns[d < rho[ns[:, 0]] + big_r + EPS]
     acc.append(np.stack([ns[:, 0], ns[:, 1] + nn], 1))
     # node - node: a conflicting pair is found from the node with the larger ball
-    hits = cKDTree(nodes).query_ball_point(nodes, 2 * rho + _EPS)
+    hits = cKDTree(nodes).query_ball_point(nodes, 2 * rho + EPS)
     cnt = np.fromiter((len(h) for h in hits), int, nn)
     nd = np.stack([np.repeat(np.arange(nn), cnt),
                    np.fromiter((s for h in hits for s in h), int, int(cnt.sum()))], 1)
     nd = np.unique(np.sort(nd, 1), axis=0)
     nd = nd[nd[:, 0] != nd[:, 1]]
     d = np.linalg.norm(nodes[nd[:, 0]] - nodes[nd[:, 1]], axis=1)
-    nd = nd[d < rho[nd[:, 0]] + rho[nd[:, 1]] + _EPS]
+    nd = nd[d < rho[nd[:, 0]] + rho[nd[:, 1]] + EPS]
     # neighbours (one beam apart) are apart if their hulls end before meeting along the beam
     key = e[:, 0] * nn + e[:, 1]
     k = nd[:, 0] * nn + nd[:, 1]
@@ -269,7 +269,7 @@ def _conflicts(lat: _Lattice, step: float) -> tuple[np.ndarray, np.ndarray]:
     edge = srt[pos]
     nb = key[edge] == k
     length = np.linalg.norm(nodes[e[edge, 1]] - nodes[e[edge, 0]], axis=1)
-    apart = nb & (lat.ext[2 * edge] + lat.ext[2 * edge + 1] < length - _EPS)
+    apart = nb & (lat.ext[2 * edge] + lat.ext[2 * edge + 1] < length - EPS)
     acc.append(nd[~apart])
     designed = np.stack([np.concatenate([e[:, 0], e[:, 1]]),
                          np.tile(np.arange(ne), 2) + nn], 1)
@@ -293,7 +293,7 @@ def _colour(n: int, pairs: np.ndarray) -> np.ndarray:
     return np.asarray(col, int)
 
 
-def _beam_triangles(lat: _Lattice, beams: np.ndarray, stitched: np.ndarray) -> np.ndarray:
+def _beam_triangles(lat: Lattice, beams: np.ndarray, stitched: np.ndarray) -> np.ndarray:
     """Point-id triangles of the given beams: side walls between the end rings (the node's ring
     where that end is stitched, else the beam's own ring, closed by a cap), outward facing."""
     seg = lat.seg
@@ -327,12 +327,10 @@ def _beam_triangles(lat: _Lattice, beams: np.ndarray, stitched: np.ndarray) -> n
 
 def _manifold(points: np.ndarray, tris: np.ndarray):
     """A manifold from point-id triangles (closed, non-overlapping pieces), or None."""
-    m3 = _m3()
     if len(tris) == 0:
         return None
     used, inv = np.unique(tris, return_inverse=True)
-    verts = np.array(points[used], np.float64)
-    out = m3.Manifold(m3.Mesh64(verts, np.ascontiguousarray(inv.reshape(-1, 3), np.uint64)))
+    out = from_arrays(points[used], inv.reshape(-1, 3))
     if out.status() != m3.Error.NoError:  # pragma: no cover - a construction bug
         raise RuntimeError(f"infill: lattice pieces do not form a manifold ({out.status()})")
     return out
@@ -341,7 +339,7 @@ def _manifold(points: np.ndarray, tris: np.ndarray):
 # --------------------------------------------------------------------------- the pieces
 
 
-def _pieces(lat: _Lattice, node_safe: np.ndarray, beam_safe: np.ndarray,
+def foam_pieces(lat: Lattice, node_safe: np.ndarray, beam_safe: np.ndarray,
             step: float) -> tuple[object | None, dict[bool, list], np.ndarray]:
     """The foam as manifolds: (stitched, groups, beam_ok).
 

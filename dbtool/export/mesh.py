@@ -1,11 +1,10 @@
-"""Design occupancy -> watertight manifold mesh in millimetres (SPEC section 8).
+"""Design occupancy -> watertight manifold mesh in millimetres (docs/method.md §8).
 
 A body's particles are splatted onto a voxel grid (one voxel per lattice site), smoothed, and the
 0.5 level set of the trilinear interpolant is meshed by marching tetrahedra
 (:mod:`dbtool.export.isosurface`), which always returns a manifold (watertight, consistently
 oriented) solid. The largest connected
-component is kept. :func:`voxelize` goes the other way (a manifold -> voxels, by slicing) so
-depth and wall thickness can be measured on any part, channels and infill included.
+component is kept. :mod:`dbtool.export.voxels` goes the other way (a manifold -> voxels).
 """
 
 from __future__ import annotations
@@ -16,23 +15,15 @@ from pathlib import Path
 import numpy as np
 
 from dbtool.atomic import atomic_write
+from dbtool.export._manifold import to_trimesh
 from dbtool.export.isosurface import marching_tetrahedra
 
 MM_PER_UNIT = 1000.0  # a gripper finger (0.06 x 0.0725 x 0.0425) becomes a 60 x 72.5 x 42.5 mm part
-WALL_CAP = 10.0  # mm: walls thicker than this are not measured
 FINISH_MM = 1e-3  # mm: edges shorter than this are collapsed in the finished parts
 PITCH = 0.5  # sampling grid of the level set, in lattice spacings
 LEVEL = 0.5 - 1e-3  # iso-level of the smoothed indicator that bounds the body
 SMOOTH = 0.35  # Gaussian smoothing of the site indicator (sites): rounder than blocks, and a
 #               one-site plate keeps 93% of its volume (0.6 keeps 54%; tests/test_export.py)
-
-
-def manifold3d():
-    try:
-        import manifold3d as m3
-    except ImportError as exc:  # pragma: no cover
-        raise ImportError("export needs manifold3d: pip install manifold3d") from exc
-    return m3
 
 
 @dataclass
@@ -142,123 +133,7 @@ def largest_component(solid):
     return max(parts, key=lambda m: m.volume()) if len(parts) > 1 else solid
 
 
-def to_trimesh(manifold):
-    import trimesh
-
-    mesh = manifold.to_mesh()
-    verts = np.asarray(mesh.vert_properties)[:, :3]
-    return trimesh.Trimesh(verts, np.asarray(mesh.tri_verts), process=False)
-
-
 def write_stl(manifold, path: Path) -> Path:
     """Binary STL (mm), written atomically."""
     mesh = to_trimesh(manifold)
     return atomic_write(Path(path), lambda tmp: mesh.export(tmp, file_type="stl"))
-
-
-def voxelize(solid, pitch: float, pad: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    """Inside mask of a manifold on a grid of ``pitch`` (mm) and its voxel (0,0,0) centre.
-
-    Each z layer is a manifold3d cross-section rasterised by the winding of its contours, so
-    no ray casting (and no rtree) is needed.
-    """
-    from matplotlib.path import Path as MplPath
-
-    box = solid.bounding_box()
-    lo = np.array(box[:3]) - pad * pitch
-    n = np.ceil((np.array(box[3:]) - lo) / pitch).astype(int) + pad + 1
-    # a small irrational offset keeps voxel centres off the faces of axis-aligned parts
-    origin = lo + pitch * (0.5 + 1e-3 * np.sqrt(2))
-    xs, ys = (origin[i] + pitch * np.arange(n[i]) for i in range(2))
-    xy = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
-    inside = np.zeros(n, bool)
-    for k in range(n[2]):
-        polys = solid.slice(float(origin[2] + pitch * k)).to_polygons()
-        if not polys:
-            continue
-        wind = np.zeros(len(xy), int)
-        for poly in polys:
-            p = np.asarray(poly)
-            area = 0.5 * np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])
-            wind += np.sign(area).astype(int) * MplPath(p).contains_points(xy)
-        inside[:, :, k] = (wind > 0).reshape(n[0], n[1])
-    return inside, origin
-
-
-@dataclass
-class Voxels:
-    """A voxelised part and the depth of its voxels below the surface (mm)."""
-
-    inside: np.ndarray
-    origin: np.ndarray
-    pitch: float
-
-    @classmethod
-    def of(cls, solid, pitch: float = 0.5) -> Voxels:
-        inside, origin = voxelize(solid, pitch)
-        return cls(inside, origin, pitch)
-
-    def depth(self) -> np.ndarray:
-        """Distance (mm) from each inside voxel centre to the surface; 0 outside."""
-        from scipy.ndimage import distance_transform_edt
-
-        d = distance_transform_edt(self.inside) * self.pitch
-        return np.where(self.inside, np.maximum(d - 0.5 * self.pitch, 0.0), 0.0)
-
-    def depth_at(self, p_mm: np.ndarray, depth: np.ndarray | None = None) -> np.ndarray:
-        """Depth (mm, linear interpolation) at points (n, 3); negative is not resolved (0)."""
-        from scipy.ndimage import map_coordinates
-
-        d = self.depth() if depth is None else depth
-        u = (np.atleast_2d(p_mm) - self.origin) / self.pitch
-        return map_coordinates(d, u.T, order=1, mode="constant")
-
-
-def wall_thickness(solid, cap: float = WALL_CAP, eps: float = 1e-3,
-                   cos_max: float = 0.5) -> np.ndarray:
-    """Wall thickness (mm) at every triangle: the distance from its centroid along the inward
-    normal to where the ray leaves the solid (manifold3d's ray cast). Counted only where the
-    exit face is within 60 degrees of opposite (``cos_max``: a ray leaving through a fillet
-    beside its start measures an edge, not a wall); ``inf`` there and where the wall is thicker
-    than ``cap`` (short rays keep the cast cheap on large flat faces)."""
-    mesh = solid.to_mesh()
-    v = np.asarray(mesh.vert_properties)[:, :3]
-    tri = v[np.asarray(mesh.tri_verts)]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    area = 0.5 * np.linalg.norm(n, axis=1)
-    n /= np.maximum(2 * area[:, None], 1e-30)
-    c = tri.mean(1)
-    start, end = (c - eps * n).tolist(), (c - cap * n).tolist()
-    out = np.full(len(c), np.inf)
-    for i in np.flatnonzero(area > 1e-4):  # a sliver triangle has no reliable normal
-        hits = solid.ray_cast(start[i], end[i])
-        if hits and -float(np.dot(hits[0].normal, n[i])) >= cos_max:
-            out[i] = hits[0].distance * (cap - eps) + eps
-    return out
-
-
-def mesh_report(solid, thickness: bool = True) -> dict:
-    """Fabrication checks of one part (SPEC 8): watertightness, bodies, genus, volume, bounding
-    box and the thinnest wall (ray cast along the inward normal of every triangle).
-
-    ``watertight`` and ``is_volume`` are trimesh's verdict on the part as an STL reader sees it:
-    float32 vertices welded by position, so two vertices that only a double can tell apart
-    (a pinch) count against it."""
-    import trimesh
-
-    mesh = solid.to_mesh()
-    tm = trimesh.Trimesh(np.asarray(mesh.vert_properties, np.float32)[:, :3],
-                         np.asarray(mesh.tri_verts), process=True)
-    lo, hi = tm.bounds
-    rep = {
-        "watertight": bool(tm.is_watertight), "is_volume": bool(tm.is_volume),
-        "manifold_status": str(solid.status()).split(".")[-1],
-        "bodies": len(solid.decompose()), "genus": int(solid.genus()),
-        "volume_mm3": float(solid.volume()), "triangles": int(solid.num_tri()),
-        "bbox_mm": (hi - lo).round(3).tolist(), "bbox_min_mm": lo.round(3).tolist(),
-    }
-    if thickness:
-        t = wall_thickness(solid)
-        rep["min_wall_mm"] = round(float(t.min()), 3) if np.isfinite(t).any() else WALL_CAP
-        rep["min_wall_capped"] = not np.isfinite(t).any()  # every wall thicker than the cap
-    return rep

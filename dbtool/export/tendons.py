@@ -1,4 +1,4 @@
-"""Tendon routing of the gripper fingers (SPEC section 8; the paper's appendix G).
+"""Tendon routing of the gripper fingers (docs/method.md §8; the paper's appendix G).
 
 The paper's gripper closes both fingers with one motor through underactuated tendons, four
 routing points per finger, and Teflon tubes that carry the tendons away from the fingers. Here
@@ -24,7 +24,9 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from dbtool.export.mesh import OccupancyField, Voxels
+from dbtool.export._manifold import manifold3d as m3
+from dbtool.export.mesh import OccupancyField
+from dbtool.export.voxels import Voxels
 
 ROLES = {0: "extension", 1: "flexion"}  # gripping's group 0 is the outer strip, 1 the inner
 
@@ -225,8 +227,6 @@ def channel_solid(tendon: Tendon, radius: float, root_mm: float, segments: int =
     """The channel to cut for ``tendon`` (mm): a tube of ``radius`` from above the base's top
     down its path to the anchor. With a side exit the tube runs in the air between the base and
     the finger's side, so only the base's hole and the drilled part in the finger are cut."""
-    import manifold3d as m3
-
     top = np.array(tendon.exit) + [0.0, 2 * radius, 0.0]  # leave the base's top cleanly
     if tendon.via:
         below = np.array([tendon.exit[0], root_mm - 0.05, tendon.exit[2]])
