@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import random
+import time
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,46 @@ def seed_everything(seed: int) -> None:
         torch.manual_seed(seed)
     except ImportError:  # pragma: no cover
         pass
+
+
+RUNS = Path("runs")  # where commands put their run directories unless told otherwise
+
+
+def default_run_dir(kind: str, task: str | None = None, root: str | Path = RUNS) -> Path:
+    """``root/KIND-TASK-YYYYmmdd-HHMMSS`` (``root/KIND-YYYYmmdd-HHMMSS`` without a task)."""
+    parts = [kind, *([task] if task else []), time.strftime("%Y%m%d-%H%M%S")]
+    return Path(root) / "-".join(parts)
+
+
+def latest_design(root: str | Path = RUNS) -> Path | None:
+    """The newest ``design.npz`` of the run directories under ``root`` (``None``: none)."""
+    found = sorted(Path(root).glob("*/design.npz"), key=lambda p: p.stat().st_mtime)
+    return found[-1] if found else None
+
+
+def find_design(run_dir: str | Path | None = None, design: str | Path | None = None,
+                root: str | Path = RUNS) -> Path:
+    """The design file a command works on: ``run_dir/design.npz``, the file ``design``, or
+    the newest under ``root``. ``ValueError`` when there is none or both are given."""
+    if run_dir is not None and design is not None:
+        raise ValueError("give a run directory or --design FILE, not both")
+    if run_dir is not None:
+        path = Path(run_dir) / "design.npz"
+        if not path.is_file():
+            raise ValueError(f"{run_dir} holds no design.npz (is it a finished `dbtool design` "
+                             "run?)")
+        return path
+    found = Path(design) if design is not None else latest_design(root)
+    if found is None:
+        raise ValueError(f"no design found under {root}/; run `dbtool design TASK` or pass "
+                         "--design FILE")
+    return found
+
+
+def design_name(path: str | Path) -> str:
+    """A design's name: its run directory's for a run's ``design.npz``, else the file's."""
+    path = Path(path)
+    return path.parent.name if path.name == "design.npz" else path.stem
 
 
 def write_json(path: Path, obj) -> Path:

@@ -5,7 +5,7 @@ import pytest
 
 from dbtool.sim.bodies import lattice
 from dbtool.sim.rollout import simulate
-from dbtool.sim.simulator import Material, Particles, Scene, SimulationError, Simulator
+from dbtool.sim.simulator import SUBSTEPS, Material, Particles, Scene, SimulationError, Simulator
 from dbtool.sim.tasks import get_task
 
 
@@ -33,7 +33,7 @@ def test_free_fall_matches_half_g_t_squared():
     scene = Scene(size=(0.12, 0.3, 0.12), ground_y=-1.0)  # no ground
     sim = Simulator(scene, p, mat, n_steps=steps, requires_grad=False)
     sim.forward(np.zeros((steps, 4)))
-    t = steps * 17 * mat.dt
+    t = steps * SUBSTEPS * mat.dt
     drop = p.x0[:, 1].mean() - sim.positions()[-1][:, 1].mean()
     assert drop == pytest.approx(0.5 * scene.gravity * t**2, rel=0.01)
     # no horizontal drift, no rotation of a free body

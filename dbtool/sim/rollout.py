@@ -7,6 +7,7 @@ fields (occupancy, stiffness, actuator weights) and the controller's per-step ac
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,9 +49,10 @@ def simulate(
     grad: bool = False,
     n_steps: int = N_STEPS,
     substeps: int = SUBSTEPS,
-    progress=None,
+    progress: Callable[[int], object] | None = None,
 ) -> Rollout:
-    """Simulate ``robot`` on ``task`` with ``actions`` (default: the prescribed controller)."""
+    """Simulate ``robot`` on ``task`` with ``actions`` (default: the prescribed controller);
+    ``progress(1)`` is called as each control step finishes."""
     ep = task.episode(robot)
     if actions is None:
         actions = task.controller(n_steps)

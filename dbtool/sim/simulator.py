@@ -23,6 +23,8 @@ import taichi as ti
 from dbtool.sim import kernels as K
 from dbtool.sim import runtime
 
+SUBSTEPS = 17  # MPM substeps per control step (every task; docs/method.md §3)
+
 
 class SimulationError(RuntimeError):
     """The simulation blew up (NaN, particles left the domain, or absurd velocities)."""
@@ -114,7 +116,7 @@ class Simulator:
         particles: Particles,
         material: Material | None = None,
         n_steps: int = 100,
-        substeps: int = 17,
+        substeps: int = SUBSTEPS,
         requires_grad: bool = True,
     ) -> None:
         particles.validate()
@@ -304,7 +306,8 @@ class Simulator:
         return lo, hi, vmax
 
     def forward(self, actions: np.ndarray | None = None, progress=None) -> None:
-        """Run the episode; keeps one checkpoint per control step (positions always)."""
+        """Run the episode; keeps one checkpoint per control step (positions always) and calls
+        ``progress(1)`` as each control step finishes."""
         if actions is not None:
             self.set_actions(actions)
         self._initial_state()
@@ -319,7 +322,7 @@ class Simulator:
             self._save(S, t + 1)
             K.copy_state(self.x, self.v, self.C, self.F, self.x, self.v, self.C, self.F, S, 0, n)
             if progress is not None:
-                progress(t + 1)
+                progress(1)
 
     def _save(self, src: int, t: int) -> None:
         if self.requires_grad:

@@ -11,14 +11,14 @@ from dbtool.sim.actuators import cluster_actuators
 from dbtool.sim.bodies import lattice, shape_occupancy
 from dbtool.sim.kernels import BOUND, MAX_GROUPS
 from dbtool.sim.robot import DEFAULT_STIFFNESS, Robot
-from dbtool.sim.simulator import Material, Particles, Scene
+from dbtool.sim.simulator import SUBSTEPS, Material, Particles, Scene  # noqa: F401 (re-exported)
 
 DX = 0.005  # grid spacing: the 0.08 workspace spans 16 cells
 SPACING = DX / 2  # particle spacing: 8 particles per cell
 GROUND = BOUND * DX  # the ground plane sits on top of the bottom wall
 OBJECT_STIFFNESS = 1e5  # the cube / box is a stiff elastic body
 GRAVITY = (0.0, -1.0, 0.0)
-N_STEPS, SUBSTEPS = 100, 17  # every task: 100 control steps x 17 substeps
+N_STEPS = 100  # every task: 100 control steps of SUBSTEPS (the simulator's) substeps
 
 
 @dataclass

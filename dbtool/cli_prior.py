@@ -1,0 +1,72 @@
+"""``dbtool prior``: train, export and evaluate the prior (docs/method.md §1)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from dbtool.cli_common import guarded
+
+prior_app = typer.Typer(no_args_is_help=True, help="Train, export and evaluate the prior.")
+
+
+@prior_app.command("train")
+def prior_train(
+    kind: str = typer.Option("base", help="base (text -> 1,024 points) or upsampler"),
+    steps: int = typer.Option(None, min=1, help="training steps (default: the shipped preset)"),
+    out: Path = typer.Option(None, help="run directory (default runs/prior/KIND)"),
+    resume: bool = typer.Option(False, "--resume", help="continue from OUT/checkpoint.pt"),
+    threads: int = typer.Option(None, min=1, help="torch threads (default 1)"),
+    seed: int = typer.Option(None, help="seed (default 0)"),
+) -> None:
+    """Train a model of the prior on the procedural corpus; checkpoints and resumes."""
+    from dbtool.prior.train import preset, resumed_config, train
+    from dbtool.runs import RUNS
+
+    out = out or RUNS / "prior" / kind
+    with guarded():
+        if resume:
+            cfg = resumed_config(out, steps)
+            if threads:
+                cfg.threads = threads
+        else:
+            cfg = preset(kind, steps=steps, threads=threads, seed=seed)
+        result = train(cfg, out, resume=resume, cache_dir=out.parent / "corpus")
+    typer.echo(f"trained {cfg.kind} for {result['steps']} steps ({result['elapsed_s']:.0f} s) "
+               f"-> {out / 'checkpoint.pt'}")
+
+
+@prior_app.command("export")
+def prior_export(
+    run_dir: Path = typer.Argument(..., help="a training run directory"),
+    out: Path = typer.Option(..., "-o", "--out", help="weights file to write"),
+) -> None:
+    """Write a training run's EMA weights as a shippable weights file."""
+    from dbtool.prior.train import export_weights
+
+    with guarded():
+        path = export_weights(run_dir / "checkpoint.pt", out)
+    typer.echo(f"wrote {path}")
+
+
+@prior_app.command("evaluate")
+def prior_evaluate(
+    base: Path = typer.Option(None, help="base model weights (default: the shipped ones)"),
+    samples: int = typer.Option(16, min=1, help="samples per family"),
+    steps: int = typer.Option(64, min=1, help="DDIM steps"),
+    guidance: float = typer.Option(3.0, help="guidance scale"),
+    families: list[str] = typer.Option(None, "--family", help="only these families"),
+    out: Path = typer.Option(Path("runs/prior/eval.json"), help="metrics JSON"),
+) -> None:
+    """Prompt fidelity (1-NN Chamfer), its ceiling, paraphrases, diversity, interpolation."""
+    from dbtool.prior.evaluate import evaluate
+    from dbtool.prior.pipeline import Prior
+    from dbtool.runs import write_json
+
+    with guarded():
+        prior = Prior.load(base, with_upsampler=False)
+        res = evaluate(prior, families or None, samples, steps, guidance, progress=typer.echo)
+        write_json(out, res)
+    typer.echo(f"accuracy {res['accuracy']:.3f} (lowest family {res['min_accuracy']:.2f}, "
+               f"ceiling {res['ceiling']:.3f}) -> {out}")

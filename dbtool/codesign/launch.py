@@ -1,0 +1,31 @@
+"""Open a DiffuseBot design run (``dbtool design``): start a new one or resume one
+(docs/method.md §4-5)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from dbtool.codesign.design_run import DesignRun, RunError, Settings
+
+
+def open_design_run(settings: Settings, run_dir: str | Path | None = None,
+                    resume: str | Path | None = None, arch: str = "cpu") -> DesignRun:
+    """A new run of ``settings`` in ``run_dir`` (default ``runs/design-TASK-TIME``), seeded and
+    with its directory written; or, with ``resume``, the run in that directory, which must be
+    one for ``settings.task`` (its own settings then apply). Bad settings or a run that is not
+    there raise :class:`RunError` (a ``ValueError``) before anything is written."""
+    from dbtool.runs import default_run_dir, seed_everything
+    from dbtool.sim import runtime
+
+    if resume is not None:
+        runtime.init(arch=arch)
+        run = DesignRun.resume(resume)
+        if run.settings.task != settings.task:
+            raise RunError(f"{resume} is a {run.settings.task} run, not {settings.task}")
+        return run
+    settings.configs()
+    runtime.init(arch=arch)
+    seed_everything(settings.seed)
+    run = DesignRun(run_dir or default_run_dir("design", settings.task), settings)
+    run.start(runtime.device())
+    return run
