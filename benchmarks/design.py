@@ -1,12 +1,17 @@
 """Wall time and peak memory of one design run (``dbtool design TASK --preset quick``), broken
-into its stages: prior sampling (base model + upsampler), embedding training, robotizing
-(forward and its VJP) and simulation (forward and backward).
+into the stages that run: the base model's predictions (sampling designs each epoch, the
+co-design sampler and its Langevin score), the mixture's weight steps (``mixture_step``, or
+``train_step`` for the other embedding spaces), robotizing (forward and its VJP), simulation
+(forward and backward), upsampling and the figures.
 
-The run is the library call behind the CLI (:class:`dbtool.codesign.design_run.DesignRun`), profiled
-with ``cProfile``: each share is the cumulative time of the stage's entry points, so nested
-calls are not counted twice. Peak memory is the process's maximum resident set size.
+The run is the library call behind the CLI
+(:class:`dbtool.codesign.design_run.DesignRun`). Each stage's entry points are wrapped with a
+clock that charges every second to the innermost stage running (a base-model call made inside
+``train_step`` counts as the base model's, not twice), so the stages and ``other`` add up to
+the total. Peak memory is the process's maximum resident set size.
 
-Prints a markdown table and writes ``benchmarks/results/design.json``.
+Prints a markdown table and writes ``benchmarks/results/design.json`` (``design-quick.json``
+with ``--quick``).
 
 Usage::
 
@@ -17,35 +22,73 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import cProfile
-import pstats
+import functools
+import importlib
 import resource
 import sys
 import tempfile
 import time
+from collections import Counter, defaultdict
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _results import write_result  # noqa: E402
 
-# (stage, module file suffix, function name): cumulative time of these entry points
+# (stage, module, attribute path): the entry points whose time is charged to the stage
 STAGES = [
-    ("prior sampling", "prior/diffusion.py", "guided_eps"),
-    ("prior sampling", "prior/pipeline.py", "upsample"),
-    ("embedding training", "codesign/embedding.py", "train_step"),
-    ("robotizing", "robotize/robotizer.py", "robotize"),
-    ("robotizing", "robotize/robotizer.py", "vjp"),
-    ("simulation", "sim/rollout.py", "simulate"),
+    ("base model", "dbtool.prior.pipeline", "Prior.eps"),
+    ("embedding training", "dbtool.codesign.embedding", "mixture_step"),
+    ("embedding training", "dbtool.codesign.embedding", "train_step"),
+    ("robotizing", "dbtool.robotize.robotizer", "robotize"),
+    ("robotizing", "dbtool.robotize.robotizer", "Robotized.vjp"),
+    ("simulation", "dbtool.sim.rollout", "simulate"),
+    ("upsampling", "dbtool.prior.pipeline", "Prior.upsample"),
+    ("figures", "dbtool.viz.render", "montage"),
+    ("figures", "dbtool.codesign.design_run", "performance_figure"),
 ]
+ORDER = ["base model", "embedding training", "robotizing", "simulation", "upsampling",
+         "figures"]
 
 
-def shares(stats: pstats.Stats) -> dict[str, float]:
-    out: dict[str, float] = {}
-    for (path, _line, name), (_cc, _nc, _tt, ct, _callers) in stats.stats.items():
-        for stage, suffix, fn in STAGES:
-            if name == fn and path.replace("\\", "/").endswith(suffix):
-                out[stage] = out.get(stage, 0.0) + ct
-    return out
+class StageClock:
+    """Exclusive wall time and calls per stage: nested stages are subtracted from the outer."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = defaultdict(float)
+        self.calls: Counter[str] = Counter()
+        self._nested: list[float] = []  # time spent in inner stages, per open call
+
+    def wrap(self, stage: str, fn):
+        @functools.wraps(fn)
+        def timed(*args, **kwargs):
+            self._nested.append(0.0)
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                dt = time.perf_counter() - t0
+                self.seconds[stage] += dt - self._nested.pop()
+                self.calls[stage] += 1
+                if self._nested:
+                    self._nested[-1] += dt
+        return timed
+
+    def install(self) -> None:
+        """Wrap every entry point of :data:`STAGES`: the class attribute of a method, and every
+        loaded ``dbtool`` module's binding of a function (``from ... import f`` copies)."""
+        for stage, module, attr in STAGES:
+            mod = importlib.import_module(module)
+            owner, _, name = attr.rpartition(".")
+            if owner:
+                cls = getattr(mod, owner)
+                setattr(cls, name, self.wrap(stage, getattr(cls, name)))
+                continue
+            fn = getattr(mod, name)
+            timed = self.wrap(stage, fn)
+            for m in list(sys.modules.values()):
+                if getattr(m, "__name__", "").startswith("dbtool") and \
+                        getattr(m, name, None) is fn:
+                    setattr(m, name, timed)
 
 
 def main() -> None:
@@ -56,6 +99,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path)
     args = ap.parse_args()
 
+    import dbtool.robotize  # noqa: F401 - every module whose bindings are wrapped
     from dbtool.codesign.design_run import DesignRun, Settings
     from dbtool.prior.pipeline import Prior
     from dbtool.sim import runtime
@@ -66,35 +110,34 @@ def main() -> None:
     load_s = time.perf_counter() - t0
     kw = dict(epochs=1, samples=1, n_steps=10) if args.quick else {}
     settings = Settings(args.task, "quick", args.seed, **kw)
+    clock = StageClock()
+    clock.install()
     with tempfile.TemporaryDirectory() as tmp:
         run = DesignRun(Path(tmp) / "run", settings, prior)
+        config = run.config()
         run.start(runtime.device())
-        prof = cProfile.Profile()
         t0 = time.perf_counter()
-        prof.enable()
         design = run.run(progress=False)
-        prof.disable()
         total = time.perf_counter() - t0
-    parts = shares(pstats.Stats(prof))
-    # upsample's own guided steps are inside "prior sampling" twice if nested; they are not
-    # (the upsampler calls Diffusion.sample directly), so the shares add up.
-    other = total - sum(parts.values())
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    rows = [(k, parts.get(k, 0.0)) for k in ("prior sampling", "embedding training",
-                                             "robotizing", "simulation")] + [("other", other)]
+    rows = [(k, clock.seconds.get(k, 0.0), clock.calls.get(k, 0)) for k in ORDER]
+    rows.append(("other", total - sum(clock.seconds.values()), 0))
     print(f"\n`dbtool design {args.task} --preset quick` (seed {args.seed}"
           f"{', smoke sizes' if args.quick else ''}): {total:.0f} s, peak RSS "
           f"{peak_mib:.0f} MiB, prior load {load_s:.1f} s, final metric "
           f"{design.metrics[args.task]:.5f}\n")
-    print("| stage | seconds | share |")
-    print("| --- | ---: | ---: |")
-    for k, v in rows:
-        print(f"| {k} | {v:.1f} | {100 * v / total:.1f}% |")
+    print("| stage | calls | seconds | share |")
+    print("| --- | ---: | ---: | ---: |")
+    for k, v, n in rows:
+        print(f"| {k} | {n or ''} | {v:.1f} | {100 * v / total:.1f}% |")
     write_result({"task": args.task, "seed": args.seed, "quick": args.quick,
                   "total_s": total, "prior_load_s": load_s, "peak_rss_mib": peak_mib,
                   "final_metric": design.metrics[args.task],
-                  "stages_s": dict(rows)}, args.out,
-                 Path(__file__).parent / "results" / "design.json", args.quick)
+                  "stages_s": {k: v for k, v, _ in rows},
+                  "stage_calls": {k: n for k, _, n in rows[:-1]}}, args.out,
+                 Path(__file__).parent / "results" / "design.json", args.quick,
+                 {"benchmark": "design", "run": config,
+                  "entry_points": [f"{s}: {m}:{a}" for s, m, a in STAGES]})
 
 
 if __name__ == "__main__":
