@@ -21,8 +21,8 @@ def test_mass_is_conserved_on_the_grid():
     p = _block((0.04, 0.02, 0.04), v0=(0.3, -0.5, 0.1))
     sim = Simulator(Scene(size=(0.12, 0.1, 0.12)), p, n_steps=5, requires_grad=False)
     sim.forward(np.zeros((5, 4)))
-    expected = sim.m_unit * p.phi.sum()
-    grid_mass = sim.grid_m.to_numpy()  # every substep of the last control step
+    expected = sim.stepper.consts.m_unit * p.phi.sum()
+    grid_mass = sim.grid.m.to_numpy()  # every substep of the last control step
     totals = grid_mass.reshape(grid_mass.shape[0], -1).sum(1)
     np.testing.assert_allclose(totals, expected, rtol=1e-4)
 

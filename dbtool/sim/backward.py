@@ -1,0 +1,80 @@
+"""The backward pass of an episode (docs/method.md §3): re-simulate, then adjoint kernels.
+
+Control steps are processed last to first. Each one is re-simulated from its checkpoint, which
+refills the substep state slab and the per-substep grids, then the hand-written adjoint kernels
+of :mod:`dbtool.sim.kernels_adjoint` run over its substeps in reverse. Memory grows with
+``n_steps + substeps`` particle states, not ``n_steps * substeps``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from dbtool.sim import kernels as K
+from dbtool.sim import kernels_adjoint as KA
+from dbtool.sim.state import Adjoint, State
+from dbtool.sim.stepper import Region, Stepper
+
+
+def _substep_adjoint(sp: Stepper, adj: Adjoint, s: int, r: Region) -> None:
+    """Adjoint of substep ``s``: g2p, grid_op, then p2g with the stress."""
+    sc, m, st, g, b, n = sp.scene, sp.mat, sp.state, sp.grid, sp.body, sp.n
+    if sp.atomic:
+        KA.g2p_grad_atomic(st.x, g.v, b.glued, adj.x, adj.v, adj.C, adj.scratch, s, n, *r,
+                           sc.dx, m.dt)
+    else:
+        KA.g2p_grad(st.x, g.v, b.glued, adj.x, adj.v, adj.C, adj.scratch, s, n, sp.chunks, *r,
+                    sc.dx, m.dt)
+    KA.grid_op_grad(adj.scratch, g.m, g.vin, adj.grid, sp.boxes, s, sp.chunks, *sp.dims, *r,
+                    sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction)
+    KA.p2g_grad(*st, *b.stress, adj.grid, *adj.p2g, s, n, *r, *sp.consts)
+
+
+def backward(sp: Stepper, checkpoints: State, adj: Adjoint, regions: Sequence[Region],
+             grad_x: np.ndarray, grad_v: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Gradients of a loss whose gradient w.r.t. the final ``x`` (and ``v``) is given, after a
+    forward pass that kept every control step's ``checkpoints`` and active ``regions``.
+
+    Returns d loss / d ``phi``, ``E``, ``wact``, ``actions``, ``x0`` and ``v0``.
+    """
+    S, n, f, body = sp.substeps, sp.n, sp.np_dtype, sp.body
+    for a in (body.phi, body.E, body.wact, body.act):
+        a.grad.fill(0)
+    seed_x = np.zeros((S + 1, n, 3), f)
+    seed_x[S] = grad_x
+    seed_v = np.zeros((S + 1, n, 3), f)
+    if grad_v is not None:
+        seed_v[S] = grad_v
+    adj.x.from_numpy(seed_x)
+    adj.v.from_numpy(seed_v)
+    adj.C.fill(0)
+    adj.F.fill(0)
+    wact = body.wact.to_numpy().astype(np.float64)
+    g_act = np.zeros(body.act.shape, np.float64)
+    n_steps = len(regions)
+    for t in reversed(range(n_steps)):
+        r = regions[t]
+        checkpoints.copy_to(sp.state, t, 0, n)
+        sp.segment(t, r, replay=True)
+        if t < n_steps - 1:  # the adjoint at the start of step t + 1 ends step t
+            adj.state.copy_to(adj.state, 0, S, n)
+        adj.actp.fill(0)
+        for s in reversed(range(S)):
+            _substep_adjoint(sp, adj, s, r)
+        # d loss / d u_t = sum_p w_p a_p-adjoint, summed here in a fixed order (before
+        # the autodiff kernel, which clears the adjoint of the overwritten a_p): its atomic
+        # adds from all particles into one number per group differ in the last bits from
+        # run to run (rel. 1e-5 on gripping), and the co-design sampler amplifies that.
+        # Its per-particle wact.grad has no such race.
+        g_act[t] = (wact * adj.actp.to_numpy().astype(np.float64)[:, None]).sum(0)
+        K.actuation.grad(body.wact, body.act, body.actp, t, n)
+    return {
+        "phi": adj.phi.to_numpy(),
+        "E": adj.E.to_numpy(),
+        "wact": body.wact.grad.to_numpy(),
+        "actions": g_act.astype(f),
+        "x0": adj.x.to_numpy()[0],
+        "v0": adj.v.to_numpy()[0],
+    }

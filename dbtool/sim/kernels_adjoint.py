@@ -1,0 +1,248 @@
+"""Hand-written adjoints of the MLS-MPM substep kernels (docs/method.md §3).
+
+Taichi autodiff of the 27-node stencils is slow to compile and emits atomics, so the adjoints of
+the transfers and of the stress are written by hand (``p2g_grad`` holds the stress adjoint too);
+only the per-control-step :func:`~dbtool.sim.kernels.actuation` uses autodiff. Arguments follow
+the order of :mod:`dbtool.sim.kernels`, with the adjoint arrays of
+:class:`~dbtool.sim.state.Adjoint` after the primal ones.
+"""
+
+import taichi as ti
+
+from dbtool.sim.kernels import (
+    SPREAD,
+    _base,
+    _box_normal,
+    _colliders,
+    _moduli,
+    _range,
+    _tau_unit,
+    _wall_mask,
+    _weights,
+    nd,
+)
+
+
+@ti.func
+def _cofactor(M):
+    """Cofactor matrix, ``d det(M) / dM``."""
+    out = ti.Matrix.zero(float, 3, 3)
+    for i, j in ti.static(ti.ndrange(3, 3)):
+        i1, i2, j1, j2 = (i + 1) % 3, (i + 2) % 3, (j + 1) % 3, (j + 2) % 3
+        out[i, j] = M[i1, j1] * M[i2, j2] - M[i1, j2] * M[i2, j1]
+    return out
+
+
+@ti.func
+def _stress_vjp(Cp, Fp, e, a, d, ph, G, gFn, dx, dt, p_vol, p_rho, nu, act_strength):
+    """Adjoint of :func:`_stress` for the affine-matrix adjoint ``G`` and the ``F[s+1]``
+    adjoint ``gFn``. Returns the adjoints of ``C[s]``, ``F[s]``, ``phi``, ``E`` and ``a``."""
+    eye = ti.Matrix.identity(float, 3)
+    M = eye + dt * Cp
+    Fn = M @ Fp
+    u = Fn @ d
+    tu = _tau_unit(Fn, u, a, nu, act_strength)
+    alpha = -dt * p_vol * 4.0 / (dx * dx)
+    beta = p_rho * p_vol
+    H = (alpha * ph) * G  # d L / d tau
+    g_ph = (G * (alpha * e * tu + beta * Cp)).sum()
+    g_e = (H * tu).sum()
+    Hs = H + H.transpose()
+    Hu = Hs @ u
+    g_a = -0.5 * act_strength * e * u.dot(Hu)
+    mu, lam = _moduli(e, nu)
+    J = Fn.determinant()
+    gF = gFn + mu * (Hs @ Fn) + (lam * H.trace() * (2.0 * J - 1.0)) * _cofactor(Fn) \
+        - (a * act_strength * e) * Hu.outer_product(d)
+    g_C = (beta * ph) * G + dt * (gF @ Fp.transpose())
+    g_F = M.transpose() @ gF
+    return g_C, g_F, g_ph, g_e, g_a
+
+
+@ti.kernel
+def p2g_grad(
+    x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(), ggrid: nd(),
+    xg: nd(), vg: nd(), Cg: nd(), Fg: nd(), phig: nd(), Eg: nd(), actpg: nd(),
+    s: ti.i32, n: ti.i32,
+    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
+    dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
+):
+    """Adjoint of :func:`p2g` (scatter and stress): gather the node adjoints
+    ``ggrid = (dL/d mv, dL/d m)``, then the constitutive adjoint by hand. Writes the ``v``,
+    ``C`` and ``F`` adjoints of substep ``s``, adds to its ``x`` adjoint and accumulates the
+    ``phi``, ``E`` and muscle-signal adjoints."""
+    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+    for p in range(n):
+        inv_dx = 1.0 / dx
+        m_unit = p_rho * p_vol
+        xp = x[s, p]
+        base = _base(xp, inv_dx, lo, hi)
+        fx = xp * inv_dx - ti.cast(base, float)
+        w, dw = _weights(fx)
+        ph = phi[p]
+        e = E[p]
+        a = actp[p]
+        d = adir[p]
+        m = m_unit * ph
+        vp = v[s, p]
+        Cp = C[s, p]
+        Fp = F[s, p]
+        Fn = (ti.Matrix.identity(float, 3) + dt * Cp) @ Fp
+        tau = e * _tau_unit(Fn, Fn @ d, a, nu, act_strength)
+        Ap = (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * tau + (m_unit * ph) * Cp
+        # dpos = (off - fx) dx, so A dpos = dx (A off - A fx) and every sum over the nodes of
+        # something times dpos splits into a sum with the constant offsets and one with fx.
+        Afx = Ap @ fx
+        sg = ti.Vector([0.0, 0.0, 0.0])  # sum w g
+        sgo = ti.Matrix.zero(float, 3, 3)  # sum w g (x) off
+        sc = ti.Vector([0.0, 0.0, 0.0])  # sum (dL/d w) dw/dfx
+        gm = 0.0
+        for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+            off = ti.Vector([i, j, k])
+            I = base + off
+            gg = ggrid[I[0], I[1], I[2]]
+            g = ti.Vector([gg[0], gg[1], gg[2]])
+            wt = w[i][0] * w[j][1] * w[k][2]
+            dwt = ti.Vector([
+                dw[i][0] * w[j][1] * w[k][2],
+                w[i][0] * dw[j][1] * w[k][2],
+                w[i][0] * w[j][1] * dw[k][2],
+            ])
+            q = Ap @ ti.cast(off, float) - Afx
+            gvv = g.dot(vp) + gg[3]
+            sc += (m * gvv + dx * g.dot(q)) * dwt
+            wg = wt * g
+            sg += wg
+            sgo += wg.outer_product(ti.cast(off, float))
+            gm += wt * gvv
+        xg[s, p] = xg[s, p] + inv_dx * sc - Ap.transpose() @ sg
+        vg[s, p] = m * sg
+        G = dx * (sgo - sg.outer_product(fx))  # d L / d A
+        g_C, g_F, g_ph, g_e, g_a = _stress_vjp(Cp, Fp, e, a, d, ph, G, Fg[s + 1, p], dx, dt,
+                                               p_vol, p_rho, nu, act_strength)
+        Cg[s, p] = g_C
+        Fg[s, p] = g_F
+        phig[p] = phig[p] + m_unit * gm + g_ph
+        Eg[p] = Eg[p] + g_e
+        actpg[p] = actpg[p] + g_a
+
+
+@ti.func
+def _friction_vjp(v, nrm, mu_f, g):
+    """Vector-Jacobian product of :func:`_friction` at ``v`` with the output adjoint ``g``."""
+    vn = v.dot(nrm)
+    out = g
+    if vn < 0.0:
+        vt = v - vn * nrm
+        lt = ti.sqrt(vt.dot(vt) + 1e-30)
+        if lt + mu_f * vn <= 0.0:
+            out = ti.Vector([0.0, 0.0, 0.0])
+        else:
+            h = vt / lt
+            g_vt = g + (mu_f * vn / lt) * (g - h * h.dot(g))
+            g_vn = mu_f * h.dot(g)
+            out = g_vt - nrm * nrm.dot(g_vt) + nrm * g_vn
+    return out
+
+
+@ti.kernel
+def grid_op_grad(
+    gscratch: nd(), grid_m: nd(), grid_vin: nd(), ggrid: nd(), boxes: nd(),
+    s: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
+    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
+    dx: float, dt: float, gravity: float, ground_y: float, mu_f: float,
+):
+    """Adjoint of :func:`grid_op`: ``ggrid = (dL/d mv, dL/d m)`` from the g2p adjoints."""
+    for i, j, k in ti.ndrange((lx, hx), (ly, hy), (lz, hz)):
+        g = ti.Vector([0.0, 0.0, 0.0])
+        for c in range(chunks):
+            g += gscratch[c, i, j, k]
+            gscratch[c, i, j, k] = ti.Vector([0.0, 0.0, 0.0])
+        m = grid_m[s, i, j, k]
+        out = ti.Vector([0.0, 0.0, 0.0, 0.0])
+        if m > 0.0:
+            vin = grid_vin[s, i, j, k]
+            I = ti.Vector([i, j, k])
+            pos = I * dx
+            v0, v1, v2, v3 = _colliders(pos, vin, boxes, ground_y, mu_f)
+            g = g * _wall_mask(I, v3, ti.Vector([nx, ny, nz]))
+            g = _friction_vjp(v2, _box_normal(pos, boxes, 1), mu_f, g)
+            g = _friction_vjp(v1, _box_normal(pos, boxes, 0), mu_f, g)
+            if pos[1] <= ground_y:
+                g = _friction_vjp(v0, ti.Vector([0.0, 1.0, 0.0]), mu_f, g)
+            # vin = mv / m - dt g e_y  =>  dL/dmv = g / m,  dL/dm = -g . (mv / m) / m
+            vm = vin + ti.Vector([0.0, dt * gravity, 0.0])
+            out = ti.Vector([g[0] / m, g[1] / m, g[2] / m, -g.dot(vm) / m])
+        ggrid[i, j, k] = out
+
+
+@ti.func
+def _g2p_grad_particle(
+    x: ti.template(), grid_v: ti.template(), glued: ti.template(), xg: ti.template(),
+    vg: ti.template(), Cg: ti.template(), gscratch: ti.template(), s, p, c, lo, hi, dx, dt,
+    atomic: ti.template(),
+):
+    inv_dx = 1.0 / dx
+    xp = x[s, p]
+    base = _base(xp, inv_dx, lo, hi)
+    fx = xp * inv_dx - ti.cast(base, float)
+    w, dw = _weights(fx)
+    keep = 1.0 - glued[p]
+    gx1 = xg[s + 1, p]
+    gnv = keep * (vg[s + 1, p] + dt * gx1)
+    gnC = keep * Cg[s + 1, p]
+    gfx = ti.Vector([0.0, 0.0, 0.0])
+    swg = ti.Vector([0.0, 0.0, 0.0])  # sum w v_node, for the -4/dx w gnC^T v_node term
+    for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+        off = ti.Vector([i, j, k])
+        I = base + off
+        gv = grid_v[s, I[0], I[1], I[2]]
+        wt = w[i][0] * w[j][1] * w[k][2]
+        dwt = ti.Vector([
+            dw[i][0] * w[j][1] * w[k][2],
+            w[i][0] * dw[j][1] * w[k][2],
+            w[i][0] * w[j][1] * dw[k][2],
+        ])
+        Cu = gnC @ (ti.cast(off, float) - fx)
+        gfx += dwt * (gnv.dot(gv) + 4.0 * inv_dx * gv.dot(Cu))
+        swg += wt * gv
+        val = wt * (gnv + 4.0 * inv_dx * Cu)
+        if ti.static(atomic):
+            gscratch[c, I[0], I[1], I[2]] += val
+        else:
+            gscratch[c, I[0], I[1], I[2]] = gscratch[c, I[0], I[1], I[2]] + val
+    gfx -= (4.0 * inv_dx) * (gnC.transpose() @ swg)
+    xg[s, p] = gx1 + inv_dx * gfx
+
+
+@ti.kernel
+def g2p_grad(
+    x: nd(), grid_v: nd(), glued: nd(), xg: nd(), vg: nd(), Cg: nd(), gscratch: nd(),
+    s: ti.i32, n: ti.i32, chunks: ti.i32,
+    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, dt: float,
+):
+    """Adjoint of :func:`g2p`: particle adjoints at ``s`` and node velocity adjoints."""
+    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+    for q in range(chunks * SPREAD):
+        if q % SPREAD != 0:
+            continue
+        c = q // SPREAD
+        a, b = _range(c, chunks, n)
+        for p in range(a, b):
+            _g2p_grad_particle(x, grid_v, glued, xg, vg, Cg, gscratch, s, p, c, lo, hi, dx, dt,
+                               False)
+
+
+@ti.kernel
+def g2p_grad_atomic(
+    x: nd(), grid_v: nd(), glued: nd(), xg: nd(), vg: nd(), Cg: nd(), gscratch: nd(),
+    s: ti.i32, n: ti.i32,
+    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, dt: float,
+):
+    """Massively parallel variant of :func:`g2p_grad` (GPU): atomic adds into one copy."""
+    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+    for p in range(n):
+        _g2p_grad_particle(x, grid_v, glued, xg, vg, Cg, gscratch, s, p, 0, lo, hi, dx, dt,
+                           True)
+
+

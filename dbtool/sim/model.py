@@ -1,0 +1,90 @@
+"""Static description of a simulation (docs/method.md §3): the domain, the material constants
+and the particles. Units are the paper's (no physical meaning)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dbtool.sim import kernels as K
+
+SUBSTEPS = 17  # MPM substeps per control step (every task; docs/method.md §3)
+
+
+@dataclass
+class Scene:
+    """Static description of a simulation domain (units are the paper's: no physical meaning).
+
+    ``size`` is the domain extent (x, y = gravity axis, z), its origin at 0; ``boxes`` are static
+    colliders ``(center, half_extent)``; the ground is the plane ``y = ground_y`` with Coulomb
+    friction coefficient ``friction``.
+    """
+
+    size: tuple[float, float, float]
+    dx: float = 0.005
+    ground_y: float = 0.015
+    boxes: list[tuple[tuple[float, float, float], tuple[float, float, float]]] = field(
+        default_factory=list
+    )
+    friction: float = 0.5
+    gravity: float = 9.8
+
+    @property
+    def grid(self) -> tuple[int, int, int]:
+        return tuple(int(math.ceil(s / self.dx)) + 1 for s in self.size)  # type: ignore
+
+
+@dataclass
+class Material:
+    """Constants shared by every particle (per-particle stiffness ``E`` is a field).
+
+    Defaults follow SoftZoo: Poisson ratio 0.2, density 1e3; ``act_strength`` scales the muscle
+    stress relative to the particle's ``E``; ``dt`` is the substep.
+    """
+
+    nu: float = 0.2
+    density: float = 1e3
+    act_strength: float = 0.3
+    dt: float = 1e-4
+
+
+@dataclass
+class Particles:
+    """Per-particle fields in the SoftZoo interface: fixed positions, evaluated fields.
+
+    ``phi`` is the effective occupancy (mass and stress scale with it; 0 = inactive tracer),
+    ``E`` the Young's modulus, ``wact`` the weight of each of the ``MAX_GROUPS`` control
+    channels, ``adir`` the unit actuator direction, ``glued`` 1 for clamped particles,
+    ``v0`` the initial velocity.
+    """
+
+    x0: np.ndarray
+    phi: np.ndarray
+    E: np.ndarray
+    wact: np.ndarray
+    adir: np.ndarray
+    glued: np.ndarray
+    v0: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return int(self.x0.shape[0])
+
+    def validate(self) -> None:
+        n = self.n
+        if n == 0:
+            raise ValueError("the body is empty: no particles to simulate")
+        shapes = {
+            "x0": (n, 3), "phi": (n,), "E": (n,), "wact": (n, K.MAX_GROUPS),
+            "adir": (n, 3), "glued": (n,), "v0": (n, 3),
+        }
+        for name, shape in shapes.items():
+            arr = np.asarray(getattr(self, name))
+            if arr.shape != shape:
+                raise ValueError(f"particle field {name} has shape {arr.shape}, expected {shape}")
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"particle field {name} contains NaN or inf")
+        if not np.any(self.phi > 0):
+            raise ValueError("the body is empty: every particle is inactive (occupancy 0)")

@@ -1,0 +1,127 @@
+"""Forward MLS-MPM stepping of one scene (docs/method.md §3).
+
+A control step is a *segment* of ``substeps`` substeps; each substep is
+``p2g -> grid_op -> g2p`` on the substep slots of the :class:`~dbtool.sim.state.State` slab.
+The grid is only touched inside an active :class:`Region`: the particles' bounding box at the
+start of the control step, padded by the stencil and by the largest distance a particle can
+travel in one control step. :meth:`Stepper.check` fails loudly when a particle outran it.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+import taichi as ti
+
+from dbtool.sim import kernels as K
+from dbtool.sim.model import Material, Scene
+from dbtool.sim.state import ArrayPool, Body, Constants, Grid, State
+
+
+class SimulationError(RuntimeError):
+    """The simulation blew up (NaN, particles left the domain, or absurd velocities)."""
+
+
+class Region(NamedTuple):
+    """Active grid nodes ``[lo, hi)`` of one control step (unpacks into the kernels'
+    ``lx, ly, lz, hx, hy, hz`` arguments)."""
+
+    lx: int
+    ly: int
+    lz: int
+    hx: int
+    hy: int
+    hz: int
+
+    @property
+    def lo(self) -> tuple[int, ...]:
+        return tuple(self[:3])
+
+    @property
+    def hi(self) -> tuple[int, ...]:
+        return tuple(self[3:])
+
+
+class Stepper:
+    """Runs substeps and control-step segments on ``state`` with the body, grid and colliders.
+
+    ``atomic`` selects the GPU kernel variants (one grid copy, atomic adds); otherwise the
+    p2g scatter goes into ``chunks`` grid copies, one per CPU thread."""
+
+    def __init__(self, scene: Scene, material: Material, state: State, body: Body, grid: Grid,
+                 pool: ArrayPool, dtype, substeps: int, atomic: bool, chunks: int) -> None:
+        self.scene, self.mat, self.state, self.body, self.grid = scene, material, state, body, grid
+        self.substeps, self.atomic, self.chunks = substeps, atomic, chunks
+        self.n, self.dims = state.x.shape[1], scene.grid
+        self.np_dtype = np.float64 if dtype == ti.f64 else np.float32
+        p_vol = (scene.dx * 0.5) ** 3
+        self.consts = Constants(scene.dx, material.dt, p_vol, material.density, material.nu,
+                                material.act_strength)
+        self.boxes = pool(dtype, (K.MAX_BOXES, 6))
+        self.bbox = pool(dtype, (2, 3))
+        self.stats = pool(dtype, (2,))
+        if len(scene.boxes) > K.MAX_BOXES:
+            raise ValueError(f"at most {K.MAX_BOXES} box colliders per scene")
+        boxes = np.zeros((K.MAX_BOXES, 6), self.np_dtype)
+        for b, (c, h) in enumerate(scene.boxes):
+            boxes[b] = (*c, *h)
+        self.boxes.from_numpy(boxes)
+
+    # ----------------------------------------------------------------- regions
+    def region(self, lo: np.ndarray, hi: np.ndarray, vmax: float) -> Region:
+        """Active grid region of a control step from the particles' bounds at its start."""
+        dx = self.scene.dx
+        reach = (2.0 * vmax + 1.0) * self.substeps * self.mat.dt / dx
+        pad = 3 + int(math.ceil(reach))
+        a = np.floor(lo / dx).astype(int) - pad
+        b = np.floor(hi / dx).astype(int) + pad + 1
+        a = np.maximum(a, 0)
+        b = np.minimum(b, np.array(self.dims))
+        return Region(*a.tolist(), *b.tolist())
+
+    def measure(self, s: int) -> tuple[np.ndarray, np.ndarray, float, int]:
+        """Per-axis particle bounds, the largest speed component and the NaN count at slot
+        ``s`` of the state."""
+        big = np.finfo(self.np_dtype).max
+        self.bbox.from_numpy(np.array([[big] * 3, [-big] * 3], self.np_dtype))
+        self.stats.from_numpy(np.zeros(2, self.np_dtype))
+        K.bounds(self.state.x, s, self.n, self.bbox, self.stats, self.state.v)
+        bb, st = self.bbox.to_numpy(), self.stats.to_numpy()
+        return bb[0], bb[1], float(st[0]), int(st[1])
+
+    # ----------------------------------------------------------------- stepping
+    def substep(self, s: int, r: Region, last: bool = False) -> None:
+        """Substep ``s``: slot ``s`` of the state to slot ``s + 1`` (``last`` skips g2p)."""
+        sc, m, st, g = self.scene, self.mat, self.state, self.grid
+        if self.atomic:
+            K.p2g_atomic(*st, *self.body.stress, g.scratch, s, self.n, *r, *self.consts)
+        else:
+            K.p2g(*st, *self.body.stress, g.scratch, s, self.n, self.chunks, *r, *self.consts)
+        K.grid_op(g.scratch, g.m, g.vin, g.v, self.boxes, s, self.chunks, *self.dims, *r, sc.dx,
+                  m.dt, sc.gravity, sc.ground_y, sc.friction)
+        if not last:
+            K.g2p(st.x, st.v, st.C, g.v, self.body.glued, s, self.n, *r, sc.dx, m.dt)
+
+    def segment(self, t: int, r: Region, replay: bool = False) -> None:
+        """The substeps of control step ``t``. A backward ``replay`` skips the last g2p: its
+        output is the next checkpoint, which the adjoint pass does not read."""
+        b = self.body
+        K.actuation(b.wact, b.act, b.actp, t, self.n)
+        for s in range(self.substeps):
+            self.substep(s, r, last=replay and s == self.substeps - 1)
+
+    def check(self, t: int, r: Region) -> tuple[np.ndarray, np.ndarray, float]:
+        """Fail loudly on NaN or on particles that outran the grid region of control step
+        ``t``; returns the bounds at the segment's end."""
+        lo, hi, vmax, nan = self.measure(self.substeps)
+        dx = self.scene.dx
+        inside = np.all(lo / dx - 0.5 >= np.array(r.lo)) and np.all(
+            hi / dx - 0.5 < np.array(r.hi) - 2)
+        if nan or not np.isfinite(vmax) or not inside:
+            raise SimulationError(
+                f"simulation blew up at control step {t + 1}: NaN state or particles moved "
+                f"farther than the grid allows (max speed {vmax:.3g})"
+            )
+        return lo, hi, vmax
