@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dbtool.robotize.actuators import reference_robot
 from dbtool.sim.bodies import SHAPES
 from dbtool.sim.tasks import N_STEPS, SUBSTEPS, Task, get_task
 
@@ -91,7 +92,7 @@ def simulate_run(cfg: SimulateConfig, out: str | Path | None = None,
                              f"{task.name!r}")
         robot = design.robot.compact()
     else:
-        robot = task.reference_robot(cfg.shape).compact()
+        robot = reference_robot(task, cfg.shape).compact()
     seed_everything(cfg.seed)
     actions = _actions(cfg, task, design)
     run = RunDir(out or default_run_dir("simulate", task.name), cfg.resolved(), cfg.seed,

@@ -30,6 +30,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from IPython.display import Image
 
+from dbtool.robotize.actuators import reference_robot
 from dbtool.sim import runtime
 from dbtool.sim.rollout import simulate
 from dbtool.sim.tasks import TASKS, get_task
@@ -45,7 +46,7 @@ BODIES = {"balancing": "box", "landing": "sphere", "crawling": "box", "hurdling"
 results = {}
 for name in TASKS:
     task = get_task(name)
-    robot = task.reference_robot(BODIES[name]).compact()
+    robot = reference_robot(task, BODIES[name]).compact()
     ro = simulate(task, robot, task.controller(STEPS), n_steps=STEPS)
     results[name] = ro
     print(f"{task.title:13s} body={BODIES[name]:7s} particles={len(ro.episode.particles.x0):6d} "

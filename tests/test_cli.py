@@ -7,6 +7,7 @@ import sys
 import numpy as np
 
 from dbtool.design import Design
+from dbtool.robotize.actuators import reference_robot
 from dbtool.sim.tasks import get_task
 
 
@@ -35,7 +36,7 @@ def test_simulate_writes_metric_montage_and_run_dir(tmp_path):
 
 def test_simulate_a_saved_design(tmp_path):
     task = get_task("hurdling")
-    Design("hurdling", task.reference_robot("cylinder"), task.controller()).save(
+    Design("hurdling", reference_robot(task, "cylinder"), task.controller()).save(
         tmp_path / "d.npz")
     out = _run("simulate", "hurdling", "--design", str(tmp_path / "d.npz"), "--steps", "4",
                "--controller", "design", "--no-gif", "--out", str(tmp_path / "r"))
@@ -46,7 +47,7 @@ def test_bad_input_is_one_line_and_nonzero(tmp_path):
     bad = tmp_path / "bad.npz"
     bad.write_text("garbage")
     task = get_task("crawling")
-    robot = task.reference_robot("box")
+    robot = reference_robot(task, "box")
     robot.occupancy[:] = 0.0
     Design("crawling", robot, task.controller()).save(tmp_path / "empty.npz")
     cases = [
@@ -105,7 +106,7 @@ def test_export_bad_input(tmp_path):
     out = _run("export", "--design", str(tmp_path / "cloud.npz"))
     assert out.returncode != 0 and "lacks header" in out.stderr
     task = get_task("crawling")
-    Design("crawling", task.reference_robot("box"), task.controller()).save(tmp_path / "d.npz")
+    Design("crawling", reference_robot(task, "box"), task.controller()).save(tmp_path / "d.npz")
     locked = tmp_path / "locked"
     locked.mkdir()
     locked.chmod(0o500)

@@ -4,12 +4,13 @@ import numpy as np
 import pytest
 
 from dbtool.design import Design, DesignFileError
+from dbtool.robotize.actuators import reference_robot
 from dbtool.sim.tasks import get_task
 
 
 def _design():
     task = get_task("crawling")
-    robot = task.reference_robot("star")
+    robot = reference_robot(task, "star")
     return Design("crawling", robot, task.controller(), surface=np.random.rand(64, 3),
                   metrics={"crawling": 0.01}, meta={"seed": 3})
 

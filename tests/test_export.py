@@ -19,6 +19,7 @@ from dbtool.export.assembly import ExportConfig, build, design_volume, export_de
 from dbtool.export.mesh import OccupancyField
 from dbtool.export.report import mesh_report, wall_thickness
 from dbtool.export.threemf import write_3mf
+from dbtool.robotize.actuators import reference_robot, robot_from_occupancy
 from dbtool.sim.robot import Robot
 from dbtool.sim.tasks import TASKS, get_task
 from dbtool.sim.tasks.gripping import FULL
@@ -26,7 +27,7 @@ from dbtool.sim.tasks.gripping import FULL
 
 def _finger() -> Design:
     task = get_task("gripping")
-    return Design("gripping", task.reference_robot("finger"), task.controller())
+    return Design("gripping", reference_robot(task, "finger"), task.controller())
 
 
 def _inside_with_clearance(solid, point, clearance: float) -> bool:
@@ -129,7 +130,7 @@ def test_channels_keep_one_body_and_the_wall_around_them(gripper):
 @pytest.mark.parametrize("task", sorted(set(TASKS) - {"gripping"}))
 def test_body_and_actuator_regions_of_every_task(task, tmp_path):
     t = get_task(task)
-    d = Design(task, t.reference_robot("star"), t.controller())
+    d = Design(task, reference_robot(t, "star"), t.controller())
     rep = export_design(d, tmp_path / task, ExportConfig(threemf=True))
     parts = rep["parts"]
     for name, p in parts.items():
@@ -156,7 +157,7 @@ def test_random_bodies_export_watertight(tmp_path):
         radii = rng.uniform(0.12, 0.22, 4) * ws.min()
         d2 = ((pts[:, None] - centres[None]) ** 2).sum(-1)
         occ = (d2 < radii**2).any(1).astype(float)
-        robot = task.make_robot(occ)
+        robot = robot_from_occupancy(task, occ)
         d = Design("crawling", robot, task.controller())
         rep = export_design(d, tmp_path / f"blob{k}", ExportConfig(stl=True, threemf=False))
         body = rep["parts"]["body"]
@@ -166,12 +167,12 @@ def test_random_bodies_export_watertight(tmp_path):
 
 def test_bad_input_leaves_nothing_behind(tmp_path):
     t = get_task("crawling")
-    d = Design("crawling", t.reference_robot("box"), t.controller())
+    d = Design("crawling", reference_robot(t, "box"), t.controller())
     d.robot = Robot(np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros((0, 4)),
                     d.robot.directions)
     with pytest.raises(ValueError, match="no robot fields"):
         export_design(d, tmp_path / "x")
-    d = Design("crawling", t.reference_robot("box"), t.controller())
+    d = Design("crawling", reference_robot(t, "box"), t.controller())
     d.robot.occupancy[:] = 0.0
     with pytest.raises(ValueError, match="no active particles"):
         export_design(d, tmp_path / "x")
@@ -239,7 +240,7 @@ def test_voronoi_infill_through_export(tmp_path):
     pts = task.design_points()
     centre = np.array(task.design_workspace()) / 2
     occ = (np.linalg.norm(pts - centre, axis=1) < 0.009).astype(float)  # an 18 mm ball
-    d = Design("crawling", task.make_robot(occ), task.controller())
+    d = Design("crawling", robot_from_occupancy(task, occ), task.controller())
     rep = export_design(d, tmp_path / "foam", ExportConfig(infill="voronoi", threemf=False))
     body = rep["parts"]["body"]
     assert body["watertight"] and body["is_volume"] and body["bodies"] == 1

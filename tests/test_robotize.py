@@ -172,7 +172,7 @@ def test_placement_moves_continuously_with_the_cloud():
 def test_crawling_groups_are_quadrants_even_on_a_long_thin_footprint():
     """Per-axis scaling before k-means: a 6:1 plate still splits into the four quadrants the
     crawling controller expects (unscaled k-means gives stripes or quadrants unpredictably)."""
-    from dbtool.sim.actuators import cluster_actuators
+    from dbtool.robotize.actuators import cluster_actuators
 
     task = get_task("crawling")
     g = np.stack(np.meshgrid(np.linspace(0, 0.06, 49), [0.0], np.linspace(0, 0.01, 9),

@@ -9,6 +9,7 @@ derivatives along random directions are compared; the relative errors are printe
 import numpy as np
 import pytest
 
+from dbtool.robotize.actuators import reference_robot
 from dbtool.sim.rollout import simulate
 from dbtool.sim.simulator import Particles, Scene, Simulator
 from dbtool.sim.tasks import get_task
@@ -38,7 +39,7 @@ def _directional(task, robot, actions, field, direction, eps):
 @pytest.mark.parametrize("task_name", ["crawling", "box"])
 def test_task_metric_gradients_match_finite_differences(task_name):
     task = get_task(task_name)
-    robot = task.reference_robot("sphere").compact()
+    robot = reference_robot(task, "sphere").compact()
     rng = np.random.default_rng(0)
     actions = task.controller(STEPS) + 0.1 * rng.standard_normal((STEPS, task.n_groups))
     ro = simulate(task, robot, actions, grad=True, n_steps=STEPS)
@@ -117,7 +118,7 @@ def test_gradient_episodes_are_bit_reproducible():
     summed in a fixed order, so two identical gradient episodes agree exactly (the autodiff
     kernel's atomic adds differed by rel. 1e-5 on gripping, enough for co-design to diverge)."""
     task = get_task("gripping")
-    robot = task.reference_robot("box").compact()
+    robot = reference_robot(task, "box").compact()
     runs = [simulate(task, robot, grad=True, n_steps=30) for _ in range(3)]
     for ro in runs[1:]:
         for key in ("actions", "occupancy", "actuators"):

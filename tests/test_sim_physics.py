@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from dbtool.robotize.actuators import reference_robot
 from dbtool.sim.bodies import lattice
 from dbtool.sim.rollout import simulate
 from dbtool.sim.simulator import SUBSTEPS, Material, Particles, Scene, SimulationError, Simulator
@@ -42,7 +43,7 @@ def test_free_fall_matches_half_g_t_squared():
 
 def test_body_resting_on_the_ground_stays():
     task = get_task("crawling")
-    robot = task.reference_robot("box").compact()
+    robot = reference_robot(task, "box").compact()
     ro = simulate(task, robot, np.zeros((100, 4)))
     x0, x1 = ro.positions[0], ro.positions[-1]
     drift = np.abs(x1.mean(0) - x0.mean(0))
@@ -57,7 +58,7 @@ def test_body_resting_on_the_ground_stays():
 
 def test_glued_particles_do_not_move():
     task = get_task("gripping")
-    ro = simulate(task, task.reference_robot("finger").compact(), n_steps=40)
+    ro = simulate(task, reference_robot(task, "finger").compact(), n_steps=40)
     glued = ro.episode.particles.glued > 0
     assert glued.sum() > 0
     np.testing.assert_array_equal(ro.positions[:, glued], np.broadcast_to(

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from dbtool.robotize.actuators import reference_robot, robot_from_occupancy
 from dbtool.sim.bodies import random_occupancy
 from dbtool.sim.rollout import simulate
 from dbtool.sim.simulator import SimulationError
@@ -19,7 +20,7 @@ def test_six_tasks():
 @pytest.mark.parametrize("shape", ["box", "sphere"])
 def test_metric_finite_and_in_range(name, shape):
     task = get_task(name)
-    ro = simulate(task, task.reference_robot(shape).compact())
+    ro = simulate(task, reference_robot(task, shape).compact())
     lo, hi = task.metric_range
     assert np.isfinite(ro.metric)
     assert lo <= ro.metric <= hi, f"{name}/{shape}: {ro.metric}"
@@ -28,19 +29,19 @@ def test_metric_finite_and_in_range(name, shape):
 
 def test_task_setups_follow_the_spec():
     bal = get_task("balancing")
-    ep = bal.episode(bal.reference_robot("box").compact())
+    ep = bal.episode(reference_robot(bal, "box").compact())
     (c, h), = ep.scene.boxes
     np.testing.assert_allclose(np.array(h) * 2, [0.02, 0.05, 0.02])
     assert ep.particles.v0[ep.robot_mask, 1].min() == pytest.approx(0.5)
     assert ep.particles.x0[:, 1].min() >= c[1] + h[1]  # atop the stick
 
     land = get_task("landing")
-    ep = land.episode(land.reference_robot("box").compact())
+    ep = land.episode(reference_robot(land, "box").compact())
     start = ep.particles.x0.mean(0)
     np.testing.assert_allclose(start - land.target(), [-0.08, 0.045, 0.0], atol=1e-9)
 
     hur = get_task("hurdling")
-    ep = hur.episode(hur.reference_robot("box").compact())
+    ep = hur.episode(reference_robot(hur, "box").compact())
     (c, h), = ep.scene.boxes
     np.testing.assert_allclose(np.array(h) * 2, [0.01, 0.03, 0.12])
     assert c[0] - ep.particles.x0[:, 0].mean() == pytest.approx(0.07, abs=1e-9)
@@ -60,7 +61,7 @@ def test_task_setups_follow_the_spec():
     np.testing.assert_allclose(a[99], [0, 0])
 
     box = get_task("box")
-    ep = box.episode(box.reference_robot("box").compact())
+    ep = box.episode(reference_robot(box, "box").compact())
     cube = ep.particles.x0[ep.object_mask].mean(0)
     body = ep.particles.x0[ep.robot_mask].mean(0)
     assert cube[0] - body[0] == pytest.approx(0.08, abs=1e-9)
@@ -69,22 +70,22 @@ def test_task_setups_follow_the_spec():
 
 def test_hurdling_groups_first_is_nearer_the_obstacle():
     task = get_task("hurdling")
-    r = task.reference_robot("box")
+    r = reference_robot(task, "box")
     x = r.points[:, 0]
     assert x[r.actuators[:, 0] > 0].mean() > x[r.actuators[:, 1] > 0].mean()
 
 
 def test_crawler_with_prescribed_controller_moves():
     task = get_task("crawling")
-    ro = simulate(task, task.reference_robot("box").compact())
-    passive = simulate(task, task.reference_robot("box").compact(), np.zeros((100, 4)))
+    ro = simulate(task, reference_robot(task, "box").compact())
+    passive = simulate(task, reference_robot(task, "box").compact(), np.zeros((100, 4)))
     assert abs(ro.metric) > 1e-3, ro.metric
     assert abs(passive.metric) < 1e-4
 
 
 def test_gripper_fingers_close():
     task = get_task("gripping")
-    ro = simulate(task, task.reference_robot("sphere").compact())
+    ro = simulate(task, reference_robot(task, "sphere").compact())
     d = task.tip_distance(ro.episode, ro.positions)
     assert d.min() < d[0] - 2e-3, f"tip distance {d[0]:.4f} -> min {d.min():.4f}"
     mirror = ro.episode.info["finger"]
@@ -94,7 +95,7 @@ def test_gripper_fingers_close():
 def test_empty_body_is_a_clear_error():
     task = get_task("crawling")
     with pytest.raises(ValueError, match="empty"):
-        task.make_robot(np.zeros(len(task.design_points())))
+        robot_from_occupancy(task, np.zeros(len(task.design_points())))
 
 
 @pytest.mark.parametrize("name", list(TASKS))
@@ -105,7 +106,7 @@ def test_random_bodies_never_blow_up(name):
     for i in range(20):
         occ = random_occupancy(pts, task.design_workspace(), rng)
         stiffness = rng.uniform(1e4, 1e5, len(pts))
-        robot = task.make_robot(occ, stiffness).compact()
+        robot = robot_from_occupancy(task, occ, stiffness).compact()
         try:
             ro = simulate(task, robot)
         except SimulationError as exc:  # pragma: no cover - must not happen

@@ -10,6 +10,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from dbtool.robotize.actuators import reference_robot
 from dbtool.sim.tasks import N_STEPS, get_task
 
 METHODS = ("diffusebot", "particle")  # what `dbtool design --method` accepts
@@ -87,7 +88,7 @@ def particle_run(cfg: ParticleRunConfig, out: str | Path | None = None,
         if on_iteration is not None:
             on_iteration(k, metric)
 
-    d = optimise(task, task.reference_robot(cfg.shape), cfg.iterations, n_steps=cfg.steps,
+    d = optimise(task, reference_robot(task, cfg.shape), cfg.iterations, n_steps=cfg.steps,
                  callback=log)
     robot, actions = d.robot(), d.actions.detach().numpy()
     ro = simulate(task, robot.compact(), actions, n_steps=cfg.steps)

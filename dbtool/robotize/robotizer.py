@@ -11,7 +11,7 @@
    largest connected component, minimum-volume guard (:mod:`dbtool.robotize.solid`);
 5. stiffness (:mod:`dbtool.robotize.stiffness`) and actuator groups by k-means of the centred
    local coordinates along the task's axes, ordered by the task's documented key
-   (:func:`dbtool.sim.actuators.cluster_actuators`).
+   (:func:`dbtool.robotize.actuators.cluster_actuators`).
 
 The returned :class:`Robotized` keeps the torch graph from x to the occupancy, so
 :meth:`Robotized.vjp` turns the simulator's d metric / d occupancy into d metric / d x.
@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from dbtool.robotize import normals as N
+from dbtool.robotize.actuators import cluster_actuators
 from dbtool.robotize.direct_sdf import direct_occupancy
 from dbtool.robotize.dpsr import poisson_indicator
 from dbtool.robotize.robust import blend_normals, deflate, reweight
@@ -44,7 +45,6 @@ from dbtool.robotize.solid import (
     to_unit,
 )
 from dbtool.robotize.stiffness import stiffness as stiffness_map
-from dbtool.sim.actuators import cluster_actuators
 from dbtool.sim.robot import OCCUPANCY_THRESHOLD, Robot
 from dbtool.sim.tasks import Task
 from dbtool.sim.tasks.base import SPACING

@@ -1,4 +1,4 @@
-"""Common machinery of the six tasks (SPEC section 3): scene, placement, objects, metric."""
+"""Common machinery of the six tasks (docs/method.md §3): scene, placement, objects, metric."""
 
 from __future__ import annotations
 
@@ -7,10 +7,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from dbtool.sim.actuators import cluster_actuators
-from dbtool.sim.bodies import lattice, shape_occupancy
+from dbtool.sim.bodies import lattice
 from dbtool.sim.kernels import BOUND, MAX_GROUPS
-from dbtool.sim.robot import DEFAULT_STIFFNESS, Robot
+from dbtool.sim.robot import Robot
 from dbtool.sim.simulator import SUBSTEPS, Material, Particles, Scene  # noqa: F401 (re-exported)
 
 DX = 0.005  # grid spacing: the 0.08 workspace spans 16 cells
@@ -84,25 +83,6 @@ class Task:
 
     def design_workspace(self) -> tuple[float, float, float]:
         return self.workspace
-
-    def make_robot(self, occupancy: np.ndarray, stiffness: np.ndarray | None = None,
-                   points: np.ndarray | None = None) -> Robot:
-        """A robot from geometry: stiffness (constant default) and clustered actuators."""
-        pts = self.design_points() if points is None else points
-        occ = np.asarray(occupancy, float)
-        stiff = np.full(len(pts), DEFAULT_STIFFNESS) if stiffness is None else stiffness
-        robot = Robot(pts, occ, np.asarray(stiff, float), np.zeros((len(pts), self.n_groups)),
-                      np.tile(self.direction, (self.n_groups, 1)).reshape(self.n_groups, 3))
-        if not np.any(robot.active()):
-            raise ValueError("the body is empty: no particle reaches the occupancy threshold")
-        if self.n_groups:
-            robot.actuators = cluster_actuators(pts, robot.active(), self.n_groups,
-                                                self.cluster_axes, self.group_order)
-        return robot
-
-    def reference_robot(self, shape: str = "box") -> Robot:
-        pts = self.design_points()
-        return self.make_robot(shape_occupancy(shape, pts, self.design_workspace()))
 
     # ------------------------------------------------------------------ episode
     def place(self, robot: Robot) -> tuple[np.ndarray, np.ndarray]:
