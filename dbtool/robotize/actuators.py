@@ -1,8 +1,16 @@
-"""Actuators from geometry (SPEC section 2): k-means on the robot's centred local coordinates."""
+"""Actuators from geometry (docs/method.md §2): k-means on the robot's centred local coordinates.
+
+Also a robot from an occupancy on a task's design lattice (:func:`robot_from_occupancy`) and the
+tasks' reference bodies (:func:`reference_robot`): both assign their actuator groups here.
+"""
 
 from __future__ import annotations
 
 import numpy as np
+
+from dbtool.sim.bodies import shape_occupancy
+from dbtool.sim.robot import DEFAULT_STIFFNESS, Robot
+from dbtool.sim.tasks import Task
 
 
 def kmeans(points: np.ndarray, k: int, iters: int = 50) -> tuple[np.ndarray, np.ndarray]:
@@ -53,7 +61,7 @@ def cluster_actuators(
     Scaling each axis to unit spread makes the grouping a continuous function of the shape: on
     a long thin footprint the unscaled 2-D k-means has two optima (four stripes or four
     quadrants) and a perturbation of 3e-4 of the cloud flipped a crawler between them. Scaled,
-    the quadrants are the clear optimum (SPEC section 2 names them).
+    the quadrants are the clear optimum (docs/method.md §2 names them).
 
     ``order_key(centroid_xyz) -> float`` sorts the groups so that controllers address them by a
     documented role (e.g. "nearer the obstacle first").
@@ -72,3 +80,34 @@ def cluster_actuators(
     w = np.zeros((len(points), k))
     w[np.arange(len(points)), remap[nearest]] = 1.0
     return w
+
+
+def task_actuators(task: Task, points: np.ndarray, active: np.ndarray) -> np.ndarray:
+    """One-hot weights of ``task``'s actuator groups, clustered along its ``cluster_axes`` and
+    ordered by its ``group_order``."""
+    return cluster_actuators(points, active, task.n_groups, task.cluster_axes, task.group_order)
+
+
+def robot_from_occupancy(task: Task, occupancy: np.ndarray, stiffness: np.ndarray | None = None,
+                         points: np.ndarray | None = None) -> Robot:
+    """A robot of ``task`` from geometry: stiffness (constant default) and clustered actuators.
+
+    ``points`` defaults to the task's design lattice."""
+    pts = task.design_points() if points is None else points
+    occ = np.asarray(occupancy, float)
+    stiff = np.full(len(pts), DEFAULT_STIFFNESS) if stiffness is None else stiffness
+    g = task.n_groups
+    robot = Robot(pts, occ, np.asarray(stiff, float), np.zeros((len(pts), g)),
+                  np.tile(task.direction, (g, 1)).reshape(g, 3))
+    if not np.any(robot.active()):
+        raise ValueError("the body is empty: no particle reaches the occupancy threshold")
+    if g:
+        robot.actuators = task_actuators(task, pts, robot.active())
+    return robot
+
+
+def reference_robot(task: Task, shape: str = "box") -> Robot:
+    """The named reference body (:data:`dbtool.sim.bodies.SHAPES`) filling ``task``'s design
+    workspace, robotized by :func:`robot_from_occupancy`."""
+    pts = task.design_points()
+    return robot_from_occupancy(task, shape_occupancy(shape, pts, task.design_workspace()))
