@@ -117,7 +117,7 @@ def main() -> None:
         config = run.config()
         run.start(runtime.device())
         t0 = time.perf_counter()
-        design = run.run(progress=False)
+        design = run.run(show_progress=False)
         total = time.perf_counter() - t0
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     rows = [(k, clock.seconds.get(k, 0.0), clock.calls.get(k, 0)) for k in ORDER]

@@ -108,7 +108,7 @@ def design(
                        f"{len(run.state.samples)} co-designed samples done")
         typer.echo(f"run directory: {run.path}")
         try:
-            result = run.run(progress=True)
+            result = run.run(show_progress=True)
         except KeyboardInterrupt:
             typer.echo(f"interrupted; continue with: dbtool design {run.settings.task} "
                        f"--resume {run.path}", err=True)

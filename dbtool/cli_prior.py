@@ -66,7 +66,7 @@ def prior_evaluate(
 
     with guarded():
         prior = Prior.load(base, with_upsampler=False)
-        res = evaluate(prior, families or None, samples, steps, guidance, progress=typer.echo)
+        res = evaluate(prior, families or None, samples, steps, guidance, log=typer.echo)
         write_json(out, res)
     typer.echo(f"accuracy {res['accuracy']:.3f} (lowest family {res['min_accuracy']:.2f}, "
                f"ceiling {res['ceiling']:.3f}) -> {out}")

@@ -57,7 +57,7 @@ def design(name: str):
     """One `quick` design run of task ``name`` (one cell per task keeps each cell short)."""
     run = DesignRun(root / name, Settings(name, "quick", seed=0, **SIZES), prior)
     run.start("cpu")
-    final = run.run(progress=False)
+    final = run.run(show_progress=False)
     epochs = [r for r in run.state.rows if r["phase"] == "embedding"]
     return final, run.path, [round(r["mean"], 5) for r in epochs]
 

@@ -98,7 +98,7 @@ def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp
                                                                       monkeypatch):
     a = DesignRun(tmp_path / "a", _settings(), prior)
     a.start("cpu")
-    da = a.run(progress=False)
+    da = a.run(show_progress=False)
     files = {p.name for p in (tmp_path / "a").iterdir()}
     assert {"config.json", "manifest.json", "metrics.jsonl", "checkpoint.pt", "best.npz",
             "design.npz", "performance.png", "montage.png"} <= files
@@ -121,12 +121,12 @@ def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp
 
     monkeypatch.setattr(run_mod.DesignRun, "checkpoint", dying)
     with pytest.raises(Interrupt):
-        b.run(progress=False)
+        b.run(show_progress=False)
     monkeypatch.setattr(run_mod.DesignRun, "checkpoint", real)
     assert not (tmp_path / "b" / "design.npz").exists()
     rb = DesignRun.resume(tmp_path / "b", prior)
     assert rb.state.epoch == 1
-    db = rb.run(progress=False)
+    db = rb.run(show_progress=False)
     # bit-identical, co-design included: the gradient episodes are deterministic
     assert db.metrics["gripping"] == da.metrics["gripping"]
     np.testing.assert_array_equal(db.surface, da.surface)

@@ -153,7 +153,7 @@ def test_training_resumes_bit_for_bit_after_an_interruption(tmp_path, monkeypatc
     cfg = TrainConfig(kind="base", steps=6, batch=2, subset=16, per_family=1, ckpt_every=2,
                       log_every=1, warmup=2, model=ModelConfig(**TINY))
     corpus = tmp_path / "corpus"
-    train(cfg, tmp_path / "full", cache_dir=corpus, progress=False)
+    train(cfg, tmp_path / "full", cache_dir=corpus, show_progress=False)
     # the same run killed during step 5 (after the checkpoint of step 4), then resumed
     real = train_mod.make_batch
     calls = {"n": 0}
@@ -166,11 +166,11 @@ def test_training_resumes_bit_for_bit_after_an_interruption(tmp_path, monkeypatc
 
     monkeypatch.setattr(train_mod, "make_batch", dying)
     with pytest.raises(Interrupt):
-        train(cfg, tmp_path / "split", cache_dir=corpus, progress=False)
+        train(cfg, tmp_path / "split", cache_dir=corpus, show_progress=False)
     monkeypatch.setattr(train_mod, "make_batch", real)
     resumed = resumed_config(tmp_path / "split")
     assert resumed == cfg
-    train(resumed, tmp_path / "split", resume=True, cache_dir=corpus, progress=False)
+    train(resumed, tmp_path / "split", resume=True, cache_dir=corpus, show_progress=False)
     full = torch.load(tmp_path / "full" / "checkpoint.pt", weights_only=True)
     split = torch.load(tmp_path / "split" / "checkpoint.pt", weights_only=True)
     for part in ("model", "ema"):
@@ -183,9 +183,9 @@ def test_training_resumes_bit_for_bit_after_an_interruption(tmp_path, monkeypatc
     assert [r["loss"] for r in log_split] == [r["loss"] for r in log_full]
     with pytest.raises(ValueError, match="would go back"):
         train(resumed_config(tmp_path / "split", 3), tmp_path / "split", resume=True,
-              cache_dir=corpus, progress=False)
+              cache_dir=corpus, show_progress=False)
     with pytest.raises(FileExistsError):
-        train(cfg, tmp_path / "full", cache_dir=corpus, progress=False)
+        train(cfg, tmp_path / "full", cache_dir=corpus, show_progress=False)
     # shipped-weights file: same predictions as the EMA weights it came from
     path = export_weights(tmp_path / "full" / "checkpoint.pt", tmp_path / "w.pt")
     model, meta = load_model(path, "base")
@@ -249,7 +249,7 @@ def test_evaluation_runs_every_part():
 
     assert prompt_of("bar") == "a bar" and prompt_of("wings") == "a pair of wings"
     prior = Prior(tiny_model(), bf16=False)
-    res = evaluate(prior, ["ball", "star"], samples=2, steps=2, progress=None,
+    res = evaluate(prior, ["ball", "star"], samples=2, steps=2, log=None,
                    reference_families=["ball", "star", "bar", "ring", "table", "pyramid"],
                    heldout_per_family=4, metric_points=128)
     assert set(res["families"]) == {"ball", "star"}

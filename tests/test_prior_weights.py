@@ -30,7 +30,7 @@ def test_weights_ship_with_the_package():
 def test_prompt_fidelity_on_a_subset(prior):
     """1-NN family accuracy (Chamfer, held-out references) on six families, 8 samples each."""
     res = evaluate(prior, SUBSET, samples=8, steps=32, paraphrases=False, interpolate=False,
-                   progress=None, heldout_per_family=4, metric_points=256)
+                   log=None, heldout_per_family=4, metric_points=256)
     # the references cover every family, so any confusion counts as a mistake
     accs = {f: r["accuracy"] for f, r in res["families"].items()}
     assert res["ceiling"] > 0.95

@@ -225,13 +225,13 @@ class DesignRun:
         return guidance_terms(self.prior, self.opt.current(), self.emb_cfg.guidance, s.prompt,
                               s.prompt_guidance, s.prompt_t_min)
 
-    def run(self, progress: bool = True):
+    def run(self, show_progress: bool = True):
         """Finish the run from wherever it stands; returns the final :class:`Design`."""
         from tqdm import tqdm
 
         emb, cod = self.emb_cfg, self.cod_cfg
         with tqdm(total=emb.epochs, initial=self.state.epoch, desc="embedding epochs",
-                  unit="epoch", disable=not progress or None, leave=False) as bar:
+                  unit="epoch", disable=not show_progress or None, leave=False) as bar:
             while self.state.epoch < emb.epochs:
                 row = dict(self.opt.step())  # the optimiser's history keeps its own row
                 w = self.opt.embedding.weights()
@@ -246,7 +246,7 @@ class DesignRun:
         n = self.settings.samples or cod.samples
         conds = self.conds()
         with tqdm(total=n, initial=len(self.state.samples), desc="co-design samples",
-                  unit="design", disable=not progress or None, leave=False) as bar:
+                  unit="design", disable=not show_progress or None, leave=False) as bar:
             while len(self.state.samples) < n:
                 k = len(self.state.samples)
                 seed = self.settings.seed * 1_000_003 + 10_007 * (k + 1)

@@ -8,6 +8,7 @@ tests. Reference shapes come from the corpus's ``reference`` split and the ceili
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import numpy as np
 import torch
@@ -58,8 +59,9 @@ def prompt_of(family: str) -> str:
 
 def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
              steps: int = 64, guidance: float = 3.0, seed: int = 0, paraphrases: bool = True,
-             interpolate: bool = True, progress=print, reference_families: list[str] | None
-             = None, eta: float = 1.0, heldout_per_family: int = HELDOUT_PER_FAMILY,
+             interpolate: bool = True, log: Callable[[str], object] | None = print,
+             reference_families: list[str] | None = None, eta: float = 1.0,
+             heldout_per_family: int = HELDOUT_PER_FAMILY,
              metric_points: int = METRIC_POINTS) -> dict:
     """All quality metrics of the model card; numbers per family and overall.
 
@@ -95,8 +97,8 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
             "extent_ratio": float(np.ptp(gen, 1).max(1).mean()),
         }
         accs.append(acc.mean())
-        if progress:
-            progress(f"{fam:10s} acc {acc.mean():.2f}  ceiling "
+        if log is not None:
+            log(f"{fam:10s} acc {acc.mean():.2f}  ceiling "
                      f"{res['families'][fam]['ceiling']:.2f}  1-NNA "
                      f"{res['families'][fam]['one_nna']:.2f}")
     res["accuracy"] = float(np.mean(accs))
@@ -113,8 +115,8 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
             nn = ref_lab[chamfer_matrix(g, ref).argmin(1).numpy()]
             hit = np.isin(nn, [family_index(f) for f in ok])
             para[prompt] = {"families": list(ok), "accuracy": float(hit.mean())}
-            if progress:
-                progress(f"{prompt!r}: {hit.mean():.2f}")
+            if log is not None:
+                log(f"{prompt!r}: {hit.mean():.2f}")
         res["paraphrases"] = para
         res["paraphrase_accuracy"] = float(np.mean([p["accuracy"] for p in para.values()]))
     if interpolate:

@@ -149,8 +149,8 @@ def diffusion_for(kind: str) -> Diffusion:
 
 
 def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path | None = None,
-          progress: bool = True) -> dict:
-    """Train (or resume) one model; returns the final metrics."""
+          show_progress: bool = True) -> dict:
+    """Train (or resume) one model; returns the final metrics. ``show_progress``: a tqdm bar."""
     from dbtool.runs import RunDir, write_json
 
     torch.set_num_threads(max(1, cfg.threads))
@@ -193,7 +193,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path
                      "config": asdict(cfg)}, ckpt_path)
 
     bar = None
-    if progress:
+    if show_progress:
         from tqdm import tqdm
 
         bar = tqdm(total=cfg.steps, initial=start, desc=f"train {cfg.kind}", unit="step")
