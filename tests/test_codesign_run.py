@@ -10,10 +10,11 @@ import torch
 
 from dbtool.codesign import design_run as run_mod
 from dbtool.codesign.config import CodesignConfig
-from dbtool.codesign.langevin import clip_rms, codesign_sample, rms, stops
 from dbtool.codesign.design_run import DesignRun, RunError, Settings
+from dbtool.codesign.langevin import clip_rms, codesign_sample, rms, stops
 from dbtool.design import Design
 from dbtool.prior.pipeline import Prior
+from dbtool.provenance import config_hash, git_commit
 from dbtool.sim.tasks import get_task
 
 STEPS = 6  # control steps per episode: enough to exercise everything, cheap
@@ -103,6 +104,9 @@ def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp
     assert {"config.json", "manifest.json", "metrics.jsonl", "checkpoint.pt", "best.npz",
             "design.npz", "performance.png", "montage.png"} <= files
     assert not [f for f in files if f.startswith(".")]  # no temp file left behind
+    config = json.loads((tmp_path / "a" / "config.json").read_text())
+    man = json.loads((tmp_path / "a" / "manifest.json").read_text())
+    assert man["config_hash"] == config_hash(config) and man["commit"] == git_commit()["sha"]
     rows = [json.loads(line) for line in (tmp_path / "a" / "metrics.jsonl").open()]
     assert [r["epoch"] for r in rows if r["phase"] == "embedding"] == [0, 1]
     assert any(r["phase"] == "codesign" and "physics_rms" in r for r in rows)
@@ -208,3 +212,22 @@ def test_quick_preset_keeps_the_paper_schedules_drift_and_controller_budgets():
         assert drift_budget(quick) * quick.step_scale == pytest.approx(drift_budget(paper))
         assert quick.gamma * n_steps(quick) == pytest.approx(paper.gamma * n_steps(paper))
         assert preset("paper", task)[1].step_scale == 1.0
+
+
+def test_bandit_model_moves_the_mixture_onto_the_condition_that_performs():
+    """The bandit replays measured metrics through the real Embedding, Buffer and
+    mixture_step: with one condition far better than the rest, the epoch means rise."""
+    from dbtool.codesign.config import preset
+    from dbtool.codesign.embedding import caption_atoms
+    from dbtool.codesign.experiments import bandit
+
+    n = 1 + len(caption_atoms()[0])
+    metrics = [np.array([0.0, 1e-4, np.nan])] * n
+    metrics[3] = np.array([0.01])
+    emb = preset("quick", "gripping")[0]
+    runs = np.array([bandit(metrics, emb, "adam", 1.0, seed=s) for s in range(20)])
+    assert runs.shape == (20, emb.epochs)
+    assert runs[:, -1].mean() > 3 * runs[:, 0].mean()
+    assert bandit(metrics, emb, "adam", 1.0, seed=0) == runs[0].tolist()  # seeded
+    with pytest.raises(ValueError, match="conditions for a mixture"):
+        bandit(metrics[:2], emb, "sgd", 1.0, seed=0)
