@@ -1,5 +1,5 @@
-"""Export for fabrication (SPEC 8): timings of a gripper design's export, and validation of
-exports of many designs.
+"""Export for fabrication (docs/method.md §8): timings of a gripper design's export, and
+validation of exports of many designs.
 
 ``time``: wall time of meshing, tendon routing, assembly, channels and Voronoi infill for one
 gripper design (the newest ``runs/*/design.npz`` of gripping, or ``--design``).
@@ -10,7 +10,8 @@ robotized for random tasks), then checks every part as a printer would: watertig
 (trimesh), manifold3d status, one body, the volume against the design's solid volume x scale^3,
 and the STL and 3MF volumes read back (trimesh).
 
-Prints markdown tables and writes ``benchmarks/results/export.json``.
+Prints markdown tables and writes ``benchmarks/results/export-time.json`` or
+``export-validate.json``.
 
 Usage::
 

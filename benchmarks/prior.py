@@ -5,7 +5,7 @@ Cases (each in a fresh subprocess, so its peak RSS is its own):
 * ``base``: classifier-free guided DDIM sampling (guidance 3, so every step evaluates the
   conditional and the unconditional prediction as one batch) of 1,024-point clouds for one
   prompt, at batch 1 and 16 with 64 steps, and one co-design epoch's worth of designs (60
-  samples, SPEC Table 4) at 64 and 32 steps;
+  samples, Table 4 in docs/method.md §4) at 64 and 32 steps;
 * ``upsampler``: 1,024 -> 4,096 points, 32 steps, batch 16;
 * ``train``: one training step of the base model as it was trained (batch 32 x 256 points, one
   thread), with bfloat16 autocast and in float32.
@@ -59,15 +59,16 @@ def train_steps(batch: int, points: int, repeats: int) -> dict:
     """Seconds per training step of the base model, bf16 autocast and float32 (one thread)."""
     import torch
 
-    from dbtool.prior.diffusion import Diffusion
+    from dbtool.prior.diffusion import diffusion_loss
     from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
     from dbtool.prior.pipeline import BASE_WEIGHTS, load_model
+    from dbtool.prior.schedulers import NoiseSchedule
 
     torch.set_num_threads(1)
     cfg = ModelConfig(**load_model(BASE_WEIGHTS)[1]["model"])
     model = PointDiffusionTransformer(cfg)
     opt = torch.optim.AdamW(model.parameters(), 1e-4)
-    diff = Diffusion("cosine")
+    schedule = NoiseSchedule.cosine()
     x, c = torch.randn(batch, points, 3), torch.randn(batch, cfg.cond_dim)
     out = {}
     for name, bf16 in (("bf16", True), ("fp32", False)):
@@ -75,7 +76,7 @@ def train_steps(batch: int, points: int, repeats: int) -> dict:
         for r in range(repeats + 2):  # two warm-up steps
             t0 = time.perf_counter()
             with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
-                loss = diff.loss(model, x, c)
+                loss = diffusion_loss(schedule, model, x, c)
             opt.zero_grad()
             loss.backward()
             opt.step()
