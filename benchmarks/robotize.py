@@ -92,9 +92,10 @@ def clean(families: list[str]) -> dict:
 
 
 def noise(families: list[str], per_family: int, steps: list[int]) -> dict:
+    from dbtool.prior.diffusion import noise_std
     from dbtool.prior.shapes import make_shape
     from dbtool.robotize.quality import iou, noisy
-    from dbtool.robotize.robotizer import lattice_dims, noise_std, robotize
+    from dbtool.robotize.robotizer import lattice_dims, robotize
     from dbtool.robotize.solid import components
     from dbtool.sim.tasks import get_task
 

@@ -35,10 +35,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 from IPython.display import Image
 
+from dbtool.prior.diffusion import noise_std
 from dbtool.prior.shapes import make_shape
 from dbtool.robotize.cloud_metric import evaluate
 from dbtool.robotize.quality import iou, noisy
-from dbtool.robotize.robotizer import lattice_dims, noise_std, robotize
+from dbtool.robotize.robotizer import lattice_dims, robotize
 from dbtool.robotize.solid import components
 from dbtool.sim.tasks import get_task
 from dbtool.viz.robot import robot_figure

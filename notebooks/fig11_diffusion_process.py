@@ -100,7 +100,8 @@ Image("fig11_interpolation.png")
 # samples of the first prompt into crawling robots (colours: the four actuator groups).
 
 # %%
-from dbtool.robotize.robotizer import noise_std, robotize
+from dbtool.prior.diffusion import noise_std
+from dbtool.robotize.robotizer import robotize
 from dbtool.sim.tasks import get_task
 from dbtool.viz.robot import robot_figure
 

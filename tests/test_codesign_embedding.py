@@ -6,7 +6,14 @@ import torch
 
 from dbtool.codesign.buffer import Buffer
 from dbtool.codesign.config import TABLE4, TABLE5, preset
-from dbtool.codesign.embedding import Embedding, EmbeddingOptimiser, caption_atoms, train_step
+from dbtool.codesign.embedding import (
+    Embedding,
+    EmbeddingOptimiser,
+    caption_atoms,
+    guided_loss,
+    train_step,
+)
+from dbtool.prior.diffusion import diffusion_loss
 from dbtool.prior.pipeline import Prior
 from dbtool.prior.shapes import make_shape
 from dbtool.sim.tasks import get_task
@@ -79,8 +86,8 @@ def test_training_moves_only_the_embedding_and_fits_the_buffer():
         g = torch.Generator().manual_seed(123)
         x0 = torch.as_tensor(stars) * 2.0
         with torch.no_grad():
-            return float(prior.diffusion.loss(prior.eps, x0, c.detach().expand(4, -1),
-                                              generator=g, p_uncond=0.0))
+            return float(diffusion_loss(prior.scheduler, prior.eps, x0,
+                                        c.detach().expand(4, -1), generator=g, p_uncond=0.0))
 
     start = held_out_loss()
     for _ in range(30):
@@ -88,6 +95,25 @@ def test_training_moves_only_the_embedding_and_fits_the_buffer():
     assert held_out_loss() < start  # c now explains the (star) buffer better than "a ball"
     assert not torch.equal(c.detach(), c0)
     assert all(torch.equal(a, p) for a, p in zip(before, prior.base.parameters(), strict=True))
+
+
+def test_guided_loss_is_the_guided_predictors_error():
+    """``guided_loss`` = per-sample MSE of ``eps_u + s (eps_c - eps_u)`` at x_t, with the
+    gradient reaching c."""
+    prior = Prior.load(with_upsampler=False)
+    x0 = torch.as_tensor(np.stack([make_shape("star", i, "train", 0, 256).points
+                                   for i in range(2)]), dtype=torch.float32) * 2.0
+    g = torch.Generator().manual_seed(0)
+    t, eps = torch.tensor([30, 600]), torch.randn(x0.shape, generator=g)
+    c = prior.embed("a ball").clone().requires_grad_(True)
+    loss = guided_loss(prior, x0, c, 3.0, t, eps)
+    xt = prior.scheduler.add_noise(x0, eps, t)
+    with torch.no_grad():
+        un, co = prior.eps(xt, t, torch.zeros(2, 384)), prior.eps(xt, t, c.expand(2, -1))
+    want = ((un + 3.0 * (co - un) - eps) ** 2).mean(dim=(1, 2))
+    assert loss.shape == (2,) and torch.allclose(loss.detach(), want, rtol=1e-5)
+    loss.sum().backward()
+    assert c.grad is not None and float(c.grad.abs().sum()) > 0
 
 
 def test_one_epoch_samples_scores_and_trains():

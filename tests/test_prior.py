@@ -1,13 +1,16 @@
-"""The generative prior: schedule, q_sample, loss, guidance, samplers, checkpoints, network."""
+"""The generative prior: loss, guidance, sampling, checkpoints, network, corpus, text.
+
+The noise schedules and the samplers are tested in ``test_schedulers.py``."""
 
 import numpy as np
 import pytest
 import torch
 
 from dbtool.prior import shapes, text
-from dbtool.prior.diffusion import Diffusion, guided_eps
+from dbtool.prior.diffusion import diffusion_loss, guided_eps
 from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
 from dbtool.prior.pipeline import CheckpointError, Prior, load_model
+from dbtool.prior.schedulers import NoiseSchedule
 from dbtool.prior.train import TrainConfig, export_weights, read_log, resumed_config, train
 
 TINY = dict(width=32, heads=2, latents=8, depth=1, decoder_layers=1)
@@ -21,55 +24,11 @@ def tiny_model(seed: int = 0, **kw) -> PointDiffusionTransformer:
     return m.eval()
 
 
-# ---------------------------------------------------------------------------- schedule
-@pytest.mark.parametrize("schedule", ["cosine", "linear"])
-def test_schedule_identities(schedule):
-    d = Diffusion(schedule)
-    assert d.abar.shape == (1024,) and d.betas.shape == (1024,)
-    assert torch.all(d.betas > 0) and torch.all(d.betas <= 0.999)
-    assert torch.all(d.abar[1:] < d.abar[:-1])  # strictly decreasing
-    assert torch.allclose(torch.cumprod(1 - d.betas.double(), 0).float(), d.abar, atol=1e-6)
-    assert d.abar[0] > 0.99 and d.abar[-1] < 1e-3
-
-
-def test_cosine_schedule_matches_its_closed_form():
-    d = Diffusion("cosine")
-    s, T = 0.008, 1024
-    f = lambda t: np.cos((t / T + s) / (1 + s) * np.pi / 2) ** 2  # noqa: E731
-    for t in (0, 100, 512, 900):
-        assert d.abar[t].item() == pytest.approx(f(t + 1) / f(0), rel=1e-4)
-
-
-def test_q_sample_statistics():
-    d = Diffusion("cosine")
-    x0 = torch.tensor([[[0.8, -0.3, 0.1]]]).expand(20000, 1, 3)
-    g = torch.Generator().manual_seed(0)
-    for t in (50, 400, 900):
-        xt = d.q_sample(x0, torch.full((20000,), t), torch.randn(x0.shape, generator=g))
-        a = d.abar[t]
-        assert torch.allclose(xt.mean(0), a.sqrt() * x0[0], atol=0.02)
-        assert torch.allclose(xt.std(0), (1 - a).sqrt().expand(1, 3), rtol=0.03)
-
-
-def test_timesteps_hand_back_control_at_requested_t():
-    d = Diffusion("cosine")
-    ts = d.timesteps(16, include=[400, 350, 300])
-    assert ts[0] == 1023 and ts[-1] == 0 and ts == sorted(ts, reverse=True)
-    assert {400, 350, 300} <= set(ts) and len(ts) == len(set(ts))
-    seen = []
-    for step in d.steps(tiny_model(), torch.randn(2, 16, 3), [(torch.zeros(1, 384), 1.0)], 16,
-                        include=[400, 350]):
-        seen.append(step.t)
-        if step.t == 400:
-            step.x = torch.zeros_like(step.x)  # the caller may replace x_t
-    assert 400 in seen and 350 in seen and seen[-1] == -1
-
-
 # ---------------------------------------------------------------------------- training
 def test_loss_decreases_on_a_tiny_overfit_set():
     torch.manual_seed(0)
     model = PointDiffusionTransformer(ModelConfig(**TINY))
-    d = Diffusion("cosine")
+    d = NoiseSchedule.cosine()
     x0 = torch.from_numpy(np.stack([shapes.make_shape(f, 0, n_points=64).points * 2
                                     for f in ("star", "ball")]))
     cond = torch.eye(2, 384)
@@ -81,12 +40,12 @@ def test_loss_decreases_on_a_tiny_overfit_set():
     def eval_loss() -> float:
         eval_g.manual_seed(1)
         with torch.no_grad():
-            return float(np.mean([d.loss(model, x0, cond, eval_g, 0.0, t_eval).item()
+            return float(np.mean([diffusion_loss(d, model, x0, cond, eval_g, 0.0, t_eval).item()
                                   for _ in range(8)]))
 
     before = eval_loss()
     for _ in range(150):
-        loss = d.loss(model, x0, cond, g, 0.0)
+        loss = diffusion_loss(d, model, x0, cond, g, 0.0)
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -112,9 +71,22 @@ def test_composition_with_one_term_equals_plain_guidance():
     un = m(x, tt, torch.zeros(2, 384))
     plain = un + s * (m(x, tt, c.expand(2, 384)) - un)
     assert torch.allclose(guided_eps(m, x, t, [(c, s)]), plain, atol=1e-5)
-    # two terms: the sum of the two guidance directions (SPEC section 6)
+    # two terms: the sum of the two guidance directions (docs/method.md §6)
     both = plain + 2.0 * (m(x, tt, c2.expand(2, 384)) - un)
     assert torch.allclose(guided_eps(m, x, t, [(c, s), (c2, 2.0)]), both, atol=1e-5)
+
+
+def test_guidance_with_grad_is_the_same_prediction_and_differentiates_the_conditions():
+    m, x = tiny_model(), torch.randn(2, 32, 3)
+    t = torch.tensor([100, 800])  # one timestep per sample, as in the embedding's loss
+    c = torch.randn(1, 384, requires_grad=True)
+    for s in (1.0, 3.0):
+        plain = guided_eps(m, x, t, [(c, s)])
+        assert plain.grad_fn is None
+        diff = guided_eps(m, x, t, [(c, s)], grad=True)
+        assert torch.allclose(diff, plain, atol=1e-6)
+        (g,) = torch.autograd.grad(diff.square().sum(), c)
+        assert g.shape == c.shape and float(g.abs().sum()) > 0
 
 
 # ---------------------------------------------------------------------------- network

@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
+from dbtool.prior.diffusion import noise_std
 from dbtool.prior.shapes import make_shape
 from dbtool.robotize.quality import iou, mesh_inside, noisy
 from dbtool.robotize.robotizer import (
     RobotizeConfig,
     RobotizeError,
     lattice_dims,
-    noise_std,
     robotize,
 )
 from dbtool.robotize.solid import components

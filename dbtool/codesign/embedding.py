@@ -1,4 +1,4 @@
-"""Embedding optimisation (Algorithm 1, SPEC section 4): train the conditioning embedding c
+"""Embedding optimisation (Algorithm 1, docs/method.md §4): train the conditioning embedding c
 on self-generated, performance-filtered designs with the diffusion loss, theta frozen.
 
 Each epoch: sample ``samples_per_epoch`` designs from c, robotize and simulate them (forward
@@ -20,7 +20,7 @@ import torch
 
 from dbtool.codesign.buffer import Buffer, Entry
 from dbtool.codesign.config import EmbeddingConfig
-from dbtool.prior.diffusion import SCALE
+from dbtool.prior.diffusion import SCALE, guided_eps
 from dbtool.robotize import RobotizeError, evaluate
 from dbtool.sim.simulator import SimulationError
 from dbtool.sim.tasks import N_STEPS, Task
@@ -49,13 +49,8 @@ def guided_loss(prior, x0: torch.Tensor, c: torch.Tensor, guidance: float, t: to
                 eps: torch.Tensor) -> torch.Tensor:
     """Per-sample epsilon MSE of the guided predictor ``eps_u + s (eps_c - eps_u)`` (the model
     the designs are sampled from), differentiable w.r.t. ``c`` only."""
-    b = x0.shape[0]
-    xt = prior.diffusion.q_sample(x0, t, eps)
-    pred = prior.eps(xt, t, c.expand(b, -1))
-    if guidance != 1.0:
-        with torch.no_grad():
-            unc = prior.eps(xt, t, torch.zeros(b, c.shape[-1]))
-        pred = unc + guidance * (pred - unc)
+    xt = prior.scheduler.add_noise(x0, eps, t)
+    pred = guided_eps(prior.eps, xt, t, [(c, guidance)], grad=True)
     return ((pred - eps) ** 2).mean(dim=(1, 2))
 
 
@@ -73,7 +68,7 @@ def train_step(prior, c: torch.Tensor | Callable[[], torch.Tensor], opt: torch.o
         c = c()
     idx = torch.randint(len(entries), (batch_size,), generator=gen).tolist()
     x0 = torch.as_tensor(np.stack([entries[i].cloud for i in idx]), dtype=torch.float32) * SCALE
-    t = torch.randint(0, prior.diffusion.T, (batch_size,), generator=gen)
+    t = torch.randint(0, prior.scheduler.T, (batch_size,), generator=gen)
     eps = torch.randn(x0.shape, generator=gen)
     loss = guided_loss(prior, x0, c, guidance, t, eps).mean()
     objective = loss

@@ -1,4 +1,4 @@
-"""Diffusion as co-design (SPEC section 5; equations 6-7, appendix eqs. 10-13; Table 5).
+"""Diffusion as co-design (docs/method.md §5; equations 6-7, appendix eqs. 10-13; Table 5).
 
 Sampling runs with the optimised embedding. At every co-design stop
 ``t = t_max, t_max - dt, ..., t_min`` the sampler hands ``x_t`` (model space) to ``K`` steps of
@@ -6,7 +6,7 @@ unadjusted Langevin dynamics (eq. 12) on ``log p(x_t | c) + kappa R(Psi(x_t), ph
 
     eps    = eps_guided(x_t, t, c)
     s      = -eps / sqrt(1 - abar_t)                              # eq. 13, the model's score
-    x0_hat = (x_t - sqrt(1 - abar_t) eps) / sqrt(abar_t)          # the denoiser's estimate
+    x0_hat = (x_t - sqrt(1 - abar_t) eps) / sqrt(abar_t)          # predict_x0, the denoiser
     g      = d R(Psi(x0_hat), phi) / d x0_hat / sqrt(abar_t)      # robotizer + simulator
     p      = clip_rho(kappa * g)                                  # renormalised physics drift
     x_t   <- x_t + eta_t * s + eta_R * p + sigma_t * z,   z ~ N(0, I)
@@ -24,7 +24,9 @@ the cloud by ``min_move`` (RMS, model space) along the clipped gradient of its o
 ``clip_rho(v) = v * min(1, rho / rms(v))`` where ``rms`` is the root mean square of the
 per-point vectors and ``rho`` is Table 5's renorm scale. Performance R is ascended (``+p``)
 and ``-log p`` descended (``+s``). The controller phi is the per-step actuation sequence,
-initialised from the task's prescribed controller.
+initialised from the task's prescribed controller. ``abar_t``, ``beta_t``, the score's
+``sqrt(1 - abar_t)`` and the x0-estimate come from the prior's sampler
+(:class:`~dbtool.prior.schedulers.Scheduler`), which also takes the ordinary steps between stops.
 """
 
 from __future__ import annotations
@@ -36,8 +38,9 @@ import numpy as np
 import torch
 
 from dbtool.codesign.config import CodesignConfig
-from dbtool.prior.diffusion import SCALE, guided_eps
-from dbtool.robotize import RobotizeError, evaluate_full, noise_std
+from dbtool.prior.diffusion import SCALE, guided_eps, noise_std
+from dbtool.prior.schedulers import Scheduler
+from dbtool.robotize import RobotizeError, evaluate_full
 from dbtool.sim.simulator import SimulationError
 from dbtool.sim.tasks import N_STEPS, Task
 
@@ -68,12 +71,14 @@ class Physics:
 
 
 def physics(x_model: torch.Tensor, t: int, task: Task, phi: np.ndarray | None,
-            n_steps: int = N_STEPS, noisy: bool = True, smooth: bool = False) -> Physics:
+            n_steps: int = N_STEPS, noisy: bool = True, smooth: bool = False,
+            schedule: Scheduler | None = None) -> Physics:
     """Robotize ``x_model`` and differentiate the episode; ``noisy`` robotizes it as an x_t
     (noise-aware, docs/method.md §2), else as a clean cloud; ``smooth`` simulates the robot with
-    smooth presence (occupancy-weighted mass, no threshold)."""
+    smooth presence (occupancy-weighted mass, no threshold); ``schedule`` gives x_t's noise
+    level (default: the cosine schedule)."""
     x = x_model.detach().reshape(-1, 3).double().numpy() / SCALE
-    noise = noise_std(t) if noisy and t > 0 else None
+    noise = noise_std(t, schedule) if noisy and t > 0 else None
     ev = evaluate_full(x, task, phi, need_grad=True, noise=noise, n_steps=n_steps,
                        threshold=0.0 if smooth else None)
     g = torch.as_tensor(ev.grad_x, dtype=torch.float32).reshape(-1, 3) / SCALE
@@ -97,7 +102,7 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
     prompt); ``kappa = 0`` gives the plain sampler plus score-only Langevin steps (the
     ablation). Failures of the robotizer or the simulator at a noisy x_t skip the physics
     term of that step (recorded in the history)."""
-    diff = prior.diffusion
+    sched = prior.scheduler
     active = task.n_groups > 0 and cfg.gamma > 0
     phi = None
     if task.n_groups > 0:
@@ -106,31 +111,30 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
     at = stops(cfg)
     history: list[dict] = []
     last = None
-    for step in prior.sampler(conds, 1, steps, seed, include=at, eta=1.0):
+    for step in prior.sampler(conds, 1, steps, seed, include=at):
         last = step
         if step.t not in at or cfg.K < 1:
             continue
         t = step.t
         x = step.x
-        beta = float(diff.betas[t])
-        eta = min(cfg.step_scale * beta, 1.0 - float(diff.abar[t]))
+        beta, ab = sched.beta(t), sched.alpha_bar(t)
+        eta = min(cfg.step_scale * beta, 1.0 - ab)
         sigma = cfg.sigma_beta * beta
         eta_r = max(eta, cfg.min_move / (cfg.K * cfg.renorm))
         for k in range(cfg.K):
             eps = guided_eps(prior.eps, x, t, conds)
-            score = -eps / float((1 - diff.abar[t]).sqrt())
+            score = -eps / sched.sigma(t)
             row = {"t": t, "k": k, "score_rms": rms(score)}
             drift = score
             if cfg.kappa > 0:
-                ab = float(diff.abar[t])
                 try:
-                    if cfg.target == "x0":  # x0_hat = (x_t - sqrt(1 - abar) eps) / sqrt(abar)
-                        x0 = (x - (1 - ab) ** 0.5 * eps) / ab ** 0.5
-                        ph = physics(x0, t, task, phi, n_steps, noisy=False,
-                                     smooth=cfg.smooth)
+                    if cfg.target == "x0":
+                        ph = physics(sched.predict_x0(x, t, eps), t, task, phi, n_steps,
+                                     noisy=False, smooth=cfg.smooth)
                         ph.grad_x = ph.grad_x / ab ** 0.5
                     else:
-                        ph = physics(x, t, task, phi, n_steps, smooth=cfg.smooth)
+                        ph = physics(x, t, task, phi, n_steps, smooth=cfg.smooth,
+                                     schedule=sched)
                 except (RobotizeError, SimulationError, FloatingPointError) as exc:
                     row["error"] = str(exc)
                 else:

@@ -16,6 +16,7 @@ import torch
 from dbtool.prior import shapes
 from dbtool.prior.metrics import chamfer_matrix, one_nn_accuracy, one_nna, spread, subsample
 from dbtool.prior.pipeline import Prior
+from dbtool.prior.schedulers import scheduler_for
 
 REF_PER_FAMILY = 32
 HELDOUT_PER_FAMILY = 16
@@ -82,10 +83,11 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
         "samples": samples, "steps": steps, "guidance": guidance, "seed": seed, "eta": eta,
         "reference_per_family": REF_PER_FAMILY, "heldout_per_family": heldout_per_family,
         "metric_points": metric_points}}
+    sched = scheduler_for(eta, prior.scheduler.schedule)
     accs = []
     for k, fam in enumerate(fams):
         prompt = prompt_of(fam)
-        gen = prior.sample(prompt, samples, guidance, steps, seed + k, eta=eta).clouds
+        gen = prior.sample(prompt, samples, guidance, steps, seed + k, scheduler=sched).clouds
         g = subsample(gen, metric_points, seed=2)
         acc = one_nn_accuracy(chamfer_matrix(g, ref), np.full(samples, family_index(fam)),
                               ref_lab)
@@ -110,7 +112,7 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
             if not set(ok) <= set(ref_fams):
                 continue
             g = subsample(prior.sample(prompt, samples, guidance, steps, seed + 100 + i,
-                                       eta=eta).clouds,
+                                       scheduler=sched).clouds,
                           metric_points, seed=2)
             nn = ref_lab[chamfer_matrix(g, ref).argmin(1).numpy()]
             hit = np.isin(nn, [family_index(f) for f in ok])
@@ -143,11 +145,12 @@ def interpolation(prior: Prior, fam_a: str, fam_b: str, ref, ref_lab, steps: int
     a, b = prompt_of(fam_a), prompt_of(fam_b)
     ea, eb = prior.embed([a, b])
     fa, fb = family_index(fam_a), family_index(fam_b)
+    sched = scheduler_for(eta, prior.scheduler.schedule)
     rows = []
     for u in np.linspace(0, 1, n):
         e = slerp(ea, eb, float(u))
         g = subsample(prior.sample(embedding=e, n=samples, guidance=guidance, steps=steps,
-                                   seed=seed, eta=eta).clouds, ref.shape[1], seed=2)
+                                   seed=seed, scheduler=sched).clouds, ref.shape[1], seed=2)
         nn = ref_lab[chamfer_matrix(g, ref).argmin(1).numpy()]
         rows.append({"u": float(u), "share_a": float((nn == fa).mean()),
                      "share_b": float((nn == fb).mean())})

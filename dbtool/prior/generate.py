@@ -17,6 +17,7 @@ import numpy as np
 
 from dbtool.pointcloud import save_npz, save_ply
 from dbtool.prior.pipeline import Prior
+from dbtool.prior.schedulers import scheduler_for
 from dbtool.runs import write_json
 from dbtool.viz.clouds import cloud_grid
 
@@ -30,7 +31,7 @@ class GenerateSettings:
     steps: int = 64
     seed: int = 0
     upsample: bool = False
-    eta: float = 1.0  # 1: strided DDPM, 0: DDIM
+    eta: float = 1.0  # 1: strided DDPM, below 1: DDIM with this eta (0: deterministic)
 
 
 def slug(prompt: str) -> str:
@@ -52,7 +53,8 @@ def generate(prior: Prior, prompts: list[str], settings: GenerateSettings, out: 
         raise ValueError("-n and --steps must be at least 1")
     t0 = time.perf_counter()
     res = prior.sample(prompts, settings.n, settings.guidance, settings.steps, settings.seed,
-                       upsample=settings.upsample, eta=settings.eta)
+                       upsample=settings.upsample,
+                       scheduler=scheduler_for(settings.eta, prior.scheduler.schedule))
     seconds = time.perf_counter() - t0
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -1,10 +1,11 @@
 """The prior as one object: shipped weights, prompts -> point clouds, intermediate x_t.
 
-:class:`Prior` keeps the model, its schedule and the text encoder apart (diffusers-style) and
-is the only thing the co-design code talks to. Any backbone with the call signature
-``eps = backbone(x_t, t, cond)`` (clouds ``(B, N, 3)`` in model space, integer timesteps,
-``(B, 384)`` conditions) can replace the shipped transformer, e.g. a GPU-trained model or real
-Point-E weights behind an adapter: pass it as ``Prior(base=...)``.
+:class:`Prior` keeps the model, its samplers (:mod:`dbtool.prior.schedulers`) and the text
+encoder apart (diffusers-style) and is the only thing the co-design code talks to. Any
+backbone with the call signature ``eps = backbone(x_t, t, cond)`` (clouds ``(B, N, 3)`` in
+model space, integer timesteps, ``(B, 384)`` conditions) can replace the shipped transformer,
+e.g. a GPU-trained model or real Point-E weights behind an adapter: pass it as
+``Prior(base=...)``.
 """
 
 from __future__ import annotations
@@ -17,8 +18,9 @@ import numpy as np
 import torch
 
 from dbtool.prior import text
-from dbtool.prior.diffusion import SCALE, Diffusion, EpsModel, Step
+from dbtool.prior.diffusion import SCALE, EpsModel, Step, denoise
 from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
+from dbtool.prior.schedulers import DDIMScheduler, DDPMScheduler, NoiseSchedule, Scheduler
 
 WEIGHTS = Path(__file__).parent / "weights"
 BASE_WEIGHTS = WEIGHTS / "base.pt"
@@ -76,24 +78,30 @@ class Samples:
 
 
 class Prior:
-    """Text/embedding-conditioned point-cloud diffusion with an optional upsampler."""
+    """Text/embedding-conditioned point-cloud diffusion with an optional upsampler.
+
+    ``scheduler`` samples the base model (default: strided DDPM on the cosine schedule it was
+    trained with), ``up_scheduler`` the upsampler (default: DDIM on the linear schedule); a
+    sampler on another schedule than the model's training schedule gives wrong samples."""
 
     def __init__(self, base: EpsModel, upsampler: PointDiffusionTransformer | None = None,
-                 bf16: bool = True) -> None:
+                 bf16: bool = True, scheduler: Scheduler | None = None,
+                 up_scheduler: Scheduler | None = None) -> None:
         self.base, self.upsampler, self.bf16 = base, upsampler, bf16
-        self.diffusion = Diffusion("cosine")
-        self.up_diffusion = Diffusion("linear")
+        self.scheduler = scheduler or DDPMScheduler(NoiseSchedule.cosine())
+        self.up_scheduler = up_scheduler or DDIMScheduler(NoiseSchedule.linear())
 
     @classmethod
     def load(cls, base: str | Path | None = None, upsampler: str | Path | None = None,
-             with_upsampler: bool = True) -> Prior:
+             with_upsampler: bool = True, **schedulers: Scheduler) -> Prior:
         """The shipped weights (default) or the given files; the upsampler is loaded when
-        ``with_upsampler`` or a path is given."""
+        ``with_upsampler`` or a path is given. ``schedulers``: ``scheduler`` and/or
+        ``up_scheduler`` (see :class:`Prior`)."""
         model, _ = load_model(base or BASE_WEIGHTS, "base")
         up = None
         if with_upsampler or upsampler is not None:
             up, _ = load_model(upsampler or UPSAMPLER_WEIGHTS, "upsampler")
-        return cls(model, up)
+        return cls(model, up, **schedulers)
 
     # ------------------------------------------------------------------ conditions
     @staticmethod
@@ -102,17 +110,18 @@ class Prior:
         return text.encode(list(prompts) if not isinstance(prompts, str) else [prompts])
 
     def eps(self, x: torch.Tensor, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
-        """The base model's epsilon (bfloat16 autocast on the CPU when ``bf16``)."""
-        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=self.bf16):
+        """The base model's epsilon (bfloat16 autocast on ``x``'s device when ``bf16``)."""
+        with torch.autocast(x.device.type, dtype=torch.bfloat16, enabled=self.bf16):
             return self.base(x, t, cond).float()
 
     # ------------------------------------------------------------------ sampling
     def sampler(self, conds: Sequence[tuple[torch.Tensor, float]], n: int, steps: int = 64,
                 seed: int = 0, points: int = COARSE_POINTS, include: Sequence[int] = (),
-                t_start: int | None = None, x_T: torch.Tensor | None = None, eta: float = 0.0,
-                ) -> Iterator[Step]:
-        """The base sampler as a generator of :class:`Step` (model space, see
-        :meth:`Diffusion.steps`); the caller may replace ``step.x`` between updates."""
+                t_start: int | None = None, x_T: torch.Tensor | None = None,
+                scheduler: Scheduler | None = None) -> Iterator[Step]:
+        """The base sampler (``scheduler``, default :attr:`scheduler`) as a generator of
+        :class:`Step` (model space, see :func:`~dbtool.prior.diffusion.denoise`); the caller
+        may replace ``step.x`` between updates."""
         for c, s, *_ in conds:
             if not np.isfinite(s) or abs(s) > MAX_GUIDANCE:
                 raise ValueError(f"guidance scale {s} is outside [-{MAX_GUIDANCE}, "
@@ -122,19 +131,20 @@ class Prior:
         gen = torch.Generator().manual_seed(seed)
         if x_T is None:
             x_T = torch.randn((n, points, 3), generator=gen)
-        return self.diffusion.steps(self.eps, x_T, conds, steps, t_start, include, eta, gen)
+        return denoise(scheduler or self.scheduler, self.eps, x_T, conds, steps, t_start,
+                       include, gen)
 
     def sample(self, prompts: Sequence[str] | str | None = None, n: int = 1,
                guidance: float = 3.0, steps: int = 64, seed: int = 0,
                embedding: torch.Tensor | None = None, extra: Sequence[tuple[str | torch.Tensor,
                float]] = (), return_at: Sequence[int] = (), upsample: bool = False,
-               points: int = COARSE_POINTS, eta: float = 1.0) -> Samples:
+               points: int = COARSE_POINTS, scheduler: Scheduler | None = None) -> Samples:
         """``n`` clouds per prompt (or for ``embedding``: one, or one per sample),
         classifier-free guided.
 
-        ``eta`` = 1 (default) is strided DDPM, 0 is DDIM; DDPM gave sharper samples
-        (``MODEL_CARD.md``). ``extra`` adds composed guidance terms
-        ``(prompt or embedding, scale)`` (SPEC 6);
+        ``scheduler`` overrides :attr:`scheduler` (strided DDPM; DDPM gave sharper samples
+        than DDIM, ``MODEL_CARD.md``). ``extra`` adds composed guidance terms
+        ``(prompt or embedding, scale)`` (docs/method.md §6);
         ``return_at`` lists timesteps whose x_t is returned. They join the sampler's strided
         grid, so a seed gives a slightly different x_0 with and without them (the same one
         for the same ``return_at``)."""
@@ -158,7 +168,7 @@ class Prior:
         wanted = {int(t) for t in return_at}
         last = None
         for step in self.sampler(conds, n, steps, seed, points, include=sorted(wanted),
-                                 eta=eta):
+                                 scheduler=scheduler):
             if step.t in wanted:
                 inter[step.t] = step.x.numpy() / SCALE
             last = step
@@ -183,8 +193,8 @@ class Prior:
 
         def eps(x, t, cond):
             reps = x.shape[0] // n
-            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=self.bf16):
+            with torch.autocast(x.device.type, dtype=torch.bfloat16, enabled=self.bf16):
                 return self.upsampler(x, t, cond, c.repeat(reps, 1, 1)).float()
 
-        fine = self.up_diffusion.sample(eps, x_T, [(null, 1.0)], steps, generator=gen)
-        return np.concatenate([coarse, fine.numpy() / SCALE], 1)
+        *_, last = denoise(self.up_scheduler, eps, x_T, [(null, 1.0)], steps, generator=gen)
+        return np.concatenate([coarse, last.x.numpy() / SCALE], 1)

@@ -26,8 +26,9 @@ import torch
 
 from dbtool.atomic import atomic_write, atomic_write_text
 from dbtool.prior import shapes, text
-from dbtool.prior.diffusion import SCALE, Diffusion
+from dbtool.prior.diffusion import SCALE, diffusion_loss
 from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
+from dbtool.prior.schedulers import NoiseSchedule
 
 COARSE = 1024
 FINE = 4096
@@ -144,8 +145,9 @@ def make_batch(cfg: TrainConfig, clouds, cap_index, cap_count, emb, rng: np.rand
     return torch.from_numpy(x0 * SCALE), cond, coarse
 
 
-def diffusion_for(kind: str) -> Diffusion:
-    return Diffusion("cosine" if kind == "base" else "linear")
+def schedule_for(kind: str) -> NoiseSchedule:
+    """The noise schedule a model of ``kind`` is trained with (cosine base, linear upsampler)."""
+    return NoiseSchedule("cosine" if kind == "base" else "linear")
 
 
 def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path | None = None,
@@ -184,7 +186,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path
     # checkpoint leaves rows that the resumed run will write again)
     kept = [r for r in read_log(run.path) if r.get("step", 0) <= start]
     atomic_write_text(run.path / "metrics.jsonl", "".join(json.dumps(r) + "\n" for r in kept))
-    diff = diffusion_for(cfg.kind)
+    schedule = schedule_for(cfg.kind)
 
     def save(step: int) -> None:
         atomic_save({"model": model.state_dict(), "ema": ema.state_dict(),
@@ -209,7 +211,8 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path
             return model(x, t, c, coarse)
 
         with torch.autocast("cpu", dtype=torch.bfloat16, enabled=cfg.bf16):
-            loss = diff.loss(net, x0, cond, gen, p_uncond=0.1 if cfg.kind == "base" else 0.0)
+            loss = diffusion_loss(schedule, net, x0, cond, gen,
+                                  p_uncond=0.1 if cfg.kind == "base" else 0.0)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from dbtool.prior.diffusion import SCALE, Diffusion
+from dbtool.prior.diffusion import SCALE
+from dbtool.prior.schedulers import NoiseSchedule
 
 
 def iou(a: np.ndarray, b: np.ndarray) -> float:
@@ -38,9 +39,11 @@ def mesh_inside(mesh, points: np.ndarray) -> np.ndarray:
                           np.asarray(points, float)) > 0.5
 
 
-def noisy(x0: np.ndarray, t: int, seed: int = 0, schedule: str = "cosine") -> np.ndarray:
+def noisy(x0: np.ndarray, t: int, seed: int = 0, schedule: NoiseSchedule | None = None
+          ) -> np.ndarray:
     """A diffusion-like intermediate sample ``x_t = sqrt(abar_t) x_0 + sqrt(1 - abar_t) eps``,
-    computed in the prior's model space (clouds scaled by ``SCALE``) and mapped back."""
-    abar = float(Diffusion(schedule).abar[t])
+    computed in the prior's model space (clouds scaled by ``SCALE``) and mapped back
+    (``schedule``: default the base model's cosine schedule)."""
+    abar = (schedule or NoiseSchedule.cosine()).alpha_bar(t)
     eps = np.random.default_rng(seed).standard_normal(x0.shape)
     return (np.sqrt(abar) * x0 * SCALE + np.sqrt(1 - abar) * eps) / SCALE

@@ -1,4 +1,4 @@
-"""The robotizer Psi (SPEC section 2): cloud x -> Robot, and the chain rule back to x.
+"""The robotizer Psi (docs/method.md §2): cloud x -> Robot, and the chain rule back to x.
 
 ``robotize(x, task)`` runs, in torch:
 
@@ -163,8 +163,9 @@ def robotize(x, task: Task, cfg: RobotizeConfig | None = None, noise: float | No
     """Psi: the robot of cloud ``x`` (prior frame) on ``task``'s design lattice.
 
     ``noise``: the std of the Gaussian noise in ``x`` (prior frame) when it is known, e.g.
-    ``noise_std(t)`` for a diffusion sample x_t; ``None`` means a clean cloud. ``method``: ``dpsr``
-    (this module) or ``direct_sdf`` (the Figure 8 baseline, :mod:`dbtool.robotize.direct_sdf`).
+    ``dbtool.prior.diffusion.noise_std(t)`` for a diffusion sample x_t; ``None`` means a clean
+    cloud. ``method``: ``dpsr`` (this module) or ``direct_sdf`` (the Figure 8 baseline,
+    :mod:`dbtool.robotize.direct_sdf`).
     """
     cfg = cfg or RobotizeConfig()
     if method not in METHODS:
@@ -210,10 +211,3 @@ def _assemble(task: Task, cfg: RobotizeConfig, xt: torch.Tensor, occ: torch.Tens
         robot.actuators = cluster_actuators(pts, keep, task.n_groups, task.cluster_axes,
                                             task.group_order)
     return Robotized(robot, xt, occ, place, chi, w.detach().numpy(), n.detach().numpy(), noise)
-
-
-def noise_std(t: int, schedule: str = "cosine") -> float:
-    """Std of the noise in x_t, in the prior's frame (the model space is scaled by 2)."""
-    from dbtool.prior.diffusion import SCALE, Diffusion
-
-    return float((1.0 - Diffusion(schedule).abar[t]) ** 0.5) / SCALE
