@@ -19,7 +19,6 @@ class Balancing(Task):
                    "(soft voxel occupancy on the simulation grid)")
     controller_text = "none (passive)"
     initial_velocity = (0.0, 0.5, 0.0)
-    metric_range = (0.0, 1.0)
 
     def stick_centre(self) -> np.ndarray:
         return np.array([0.08, GROUND + STICK[1] / 2, 0.08])

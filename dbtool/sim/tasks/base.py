@@ -49,7 +49,6 @@ class Task:
     cluster_axes: tuple[int, ...] = ()
     direction: tuple[float, float, float] = (0.0, 1.0, 0.0)
     initial_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    metric_range: tuple[float, float] = (-np.inf, np.inf)  # sanity range used by the tests
     material = Material()
 
     # ------------------------------------------------------------------ hooks

@@ -27,7 +27,6 @@ class MovingBox(Task):
     n_groups = 2
     cluster_axes = (1,)
     direction = (1.0, 0.0, 0.0)
-    metric_range = (-0.1, 0.2)
 
     def scene(self) -> Scene:
         return Scene(size=(0.32, 0.14, 0.10), dx=DX, ground_y=GROUND)

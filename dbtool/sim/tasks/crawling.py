@@ -21,7 +21,6 @@ class Crawling(Task):
                        "ordered counter-clockwise (seen from +y) starting at the +x,+z quadrant")
     n_groups = 4
     cluster_axes = (0, 2)
-    metric_range = (-0.1, 0.2)
 
     def scene(self) -> Scene:
         return Scene(size=(0.32, 0.12, 0.12), dx=DX, ground_y=GROUND)

@@ -38,7 +38,6 @@ class Gripping(Task):
     workspace = FULL
     n_groups = 2
     cluster_axes = (2,)
-    metric_range = (-0.02, 0.08)
 
     def design_workspace(self) -> tuple[float, float, float]:
         return (FULL[0], FULL[1] - BASE, FULL[2] / 2 - CUBE / 2 - SPACING)

@@ -21,7 +21,6 @@ class Hurdling(Task):
                        "group nearer the obstacle")
     n_groups = 2
     cluster_axes = (0,)
-    metric_range = (-0.1, 0.2)
 
     def scene(self) -> Scene:
         centre = self.origin() + 0.04

@@ -19,7 +19,6 @@ class Landing(Task):
     metric_text = "exp(-||p_robot - p_target||) at the last step (p = centroid / block centre)"
     controller_text = "none (passive)"
     initial_velocity = (0.5, 0.0, 0.0)
-    metric_range = (0.0, 1.0)
 
     def target(self) -> np.ndarray:
         return np.array([0.15, GROUND + TARGET[1] / 2, 0.06])
