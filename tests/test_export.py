@@ -137,10 +137,17 @@ def test_body_and_actuator_regions_of_every_task(task, tmp_path):
         assert p["watertight"] and p["is_volume"] and p["bodies"] == 1, (name, p)
     v = rep["volume_check"]
     assert abs(v["ratio"] - 1) < 0.1, v
-    regions = [k for k in parts if k.startswith("actuator_")] or ["body"]  # passive: the body
-    assert len(regions) >= max(t.n_groups, 1) - 1
+    body = parts["body"]["volume_mm3"]
+    if t.n_groups:  # one region per actuator group, each its share of the symmetric star
+        regions = [f"actuator_{g}" for g in range(t.n_groups)]
+        assert sorted(k for k in parts if k != "body") == regions
+        for k in regions:  # measured: 0.497-0.499 of the body (2 groups), 0.249 (4 groups)
+            assert parts[k]["volume_mm3"] == pytest.approx(body / t.n_groups, rel=0.05), k
+    else:  # passive: the body is the only part
+        regions = ["body"]
+        assert list(parts) == regions
     total = sum(parts[k]["volume_mm3"] for k in regions)
-    assert abs(total - parts["body"]["volume_mm3"]) < 0.02 * parts["body"]["volume_mm3"]
+    assert abs(total - body) < 0.02 * body
     scene = trimesh.load(tmp_path / task / "assembly.3mf")
     assert len(scene.geometry) == len(regions)
     assert sum(g.volume for g in scene.geometry.values()) == pytest.approx(total, rel=1e-4)

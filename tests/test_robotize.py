@@ -25,15 +25,23 @@ def cloud(family: str, n: int = 1024, index: int = 0):
     return make_shape(family, index, "test", 0, n)
 
 
-@pytest.mark.parametrize("family", ["ball", "hook", "arch", "ring", "quadruped", "cylinder"])
+# IoU of the robotized clean cloud (1,024 points of the test split, index 0) with the mesh's
+# solid on the crawling lattice, as measured; each family must reach its measured IoU - 0.03.
+# Thin parts (star's points, table's legs, the U's arms) are a voxel or two wide, so they
+# score lowest.
+CLEAN_IOU = {"ball": 0.991, "hook": 0.949, "arch": 0.933, "ring": 0.968, "quadruped": 0.900,
+             "cylinder": 0.977, "star": 0.881, "ushape": 0.832, "table": 0.803}
+
+
+@pytest.mark.parametrize("family", list(CLEAN_IOU))
 def test_clean_cloud_matches_the_true_solid(family):
     """Surface samples of a watertight mesh: IoU with the mesh's solid on the task lattice."""
     task, shape = get_task("crawling"), cloud(family)
     rz = robotize(shape.points, task)
     truth = mesh_inside(shape.mesh, rz.placement.to_prior(task.design_points()))
     score = iou(rz.robot.active(), truth)
-    print(f"{family}: IoU {score:.3f}")
-    assert score >= 0.85
+    print(f"{family}: IoU {score:.3f} (measured {CLEAN_IOU[family]})")
+    assert score >= CLEAN_IOU[family] - 0.03
 
 
 def test_noisy_clouds_keep_their_solid_better_than_direct_sdf():
