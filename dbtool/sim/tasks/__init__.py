@@ -1,4 +1,4 @@
-"""The six tasks of the paper (SPEC section 3), by name."""
+"""The six tasks of the paper (docs/method.md §3), by name."""
 
 from __future__ import annotations
 

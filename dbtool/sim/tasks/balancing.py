@@ -1,4 +1,4 @@
-"""Balancing (SPEC section 3, Figure 3a): thrown up from a stick, land back on it."""
+"""Balancing (docs/method.md §3, Figure 3a): thrown up from a stick, land back on it."""
 
 from __future__ import annotations
 

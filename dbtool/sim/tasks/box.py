@@ -1,4 +1,4 @@
-"""Moving a box (SPEC section 3, Figure 3f): push a cube resting on the robot's right end.
+"""Moving a box (docs/method.md §3, Figure 3f): push a cube resting on the robot's right end.
 
 The paper's text names the goal 'to the left' and the metric 'to the right'; dbtool uses
 +x (to the right) for both: the cube starts on the right end and the metric is its +x travel.

@@ -1,4 +1,4 @@
-"""Crawling (SPEC section 3, Figure 3c): travel along +x with four sine-driven muscles."""
+"""Crawling (docs/method.md §3, Figure 3c): travel along +x with four sine-driven muscles."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Gripping (SPEC section 3, Figure 3e): two mirrored fingers under a glued base lift a cube.
+"""Gripping (docs/method.md §3, Figure 3e): two mirrored fingers under a glued base lift a cube.
 
 The design is one finger; the other finger is its mirror copy about the plane ``z = 0.06`` of
 the full 0.06x0.08x0.12 workspace. A base plate (its top 0.0075) is glued to the upper boundary.

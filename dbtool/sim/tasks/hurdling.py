@@ -1,4 +1,4 @@
-"""Hurdling (SPEC section 3, Figure 3d): get over an obstacle 0.07 in front."""
+"""Hurdling (docs/method.md §3, Figure 3d): get over an obstacle 0.07 in front."""
 
 from __future__ import annotations
 

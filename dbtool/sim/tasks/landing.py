@@ -1,4 +1,4 @@
-"""Landing (SPEC section 3, Figure 3b): thrown sideways, come to rest at a target."""
+"""Landing (docs/method.md §3, Figure 3b): thrown sideways, come to rest at a target."""
 
 from __future__ import annotations
 
