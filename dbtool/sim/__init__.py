@@ -1,1 +1,1 @@
-"""Differentiable MLS-MPM simulator (Taichi) and the six tasks of the paper (SPEC section 3)."""
+"""Differentiable MLS-MPM simulator (Taichi) and the six tasks of the paper (docs/method.md §3)."""

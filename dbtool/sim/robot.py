@@ -1,4 +1,4 @@
-"""The robot in SoftZoo's interface (SPEC section 2): particles at fixed positions of the task
+"""The robot in SoftZoo's interface (docs/method.md §2): particles at fixed positions of the task
 workspace, with per-particle geometry (occupancy), softness (stiffness) and actuator fields."""
 
 from __future__ import annotations
