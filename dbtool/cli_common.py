@@ -10,6 +10,7 @@ import typer
 
 
 def fail(message: str) -> None:
+    """Print ``error: message`` on stderr and exit with code 2."""
     typer.secho(f"error: {message}", err=True, fg=typer.colors.RED)
     raise typer.Exit(code=2)
 

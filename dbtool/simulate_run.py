@@ -1,7 +1,8 @@
 """One simulated episode as a run (``dbtool simulate``): a body on a task, its metric, a run
 directory with the resolved config, a montage PNG and an animated GIF (docs/method.md §3).
 
-It sits above :mod:`dbtool.sim` and :mod:`dbtool.viz`, which know nothing of each other's runs.
+A top-level module because it draws (:mod:`dbtool.viz`) as well as simulates; the simulator
+itself never imports the pictures.
 """
 
 from __future__ import annotations
