@@ -1,6 +1,6 @@
 """Point clouds on disk: binary ``.ply`` (one cloud) and ``.npz`` (a batch), written atomically.
 
-The prior's clouds live in ``[-0.5, 0.5]^3`` with y up (SPEC section 1); these files keep that
+The prior's clouds live in ``[-0.5, 0.5]^3`` with y up (docs/method.md §1); these files keep that
 frame so ``dbtool robotize CLOUD.ply`` reads back exactly what ``dbtool generate`` wrote.
 """
 

@@ -16,7 +16,7 @@
 # %% [markdown]
 # # Figure 3 — the six tasks
 #
-# Each task of the paper (SPEC section 3) with a simple reference body: the scene at the first
+# Each task of the paper (docs/method.md §3) with a simple reference body: the scene at the first
 # and the last control step, and the task metric. Bodies are reference shapes (no design yet);
 # gripping uses a finger-shaped plate and its mirror copy. Actuated tasks run their prescribed
 # open-loop controller; colours mark actuator groups (grey: the task's cube).

@@ -18,7 +18,7 @@
 # %% [markdown]
 # # Figures 4 and 10 — embedding optimisation across epochs
 #
-# Algorithm 1 (SPEC section 4, Table 4): the conditioning embedding c is trained, with the
+# Algorithm 1 (docs/method.md §4, Table 4): the conditioning embedding c is trained, with the
 # diffusion model frozen, on the best designs it produced. Each epoch samples designs from c,
 # robotizes and simulates them (forward only), adds them to a FIFO buffer and takes Adam steps
 # of the diffusion loss on the buffer's top-k. dbtool's c is a mixture over the conditions the

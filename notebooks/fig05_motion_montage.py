@@ -18,7 +18,7 @@
 # %% [markdown]
 # # Figures 5 and 9 — the final robot of each task in motion
 #
-# `dbtool design TASK` (DiffuseBot, SPEC sections 4-5) breeds a robot per task: embedding
+# `dbtool design TASK` (DiffuseBot, docs/method.md §4-§5) breeds a robot per task: embedding
 # optimisation (Algorithm 1) and then diffusion as co-design (Langevin steps whose drift adds the
 # simulator's gradient, with the controller co-optimised on active tasks). This notebook runs
 # the library call behind the CLI (`DesignRun`) for each of the six tasks on the `quick` preset

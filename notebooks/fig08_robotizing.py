@@ -17,7 +17,7 @@
 # # Figure 8 — robotizing noisy samples: DPSR (Psi) against Direct SDF
 #
 # During co-design the robotizer Psi turns intermediate diffusion samples x_t into robots and
-# carries the simulator's gradients back to the points (SPEC section 2). x_t is a surface cloud
+# carries the simulator's gradients back to the points (docs/method.md §2). x_t is a surface cloud
 # plus Gaussian noise: `x_t = sqrt(abar_t) x_0 + sqrt(1 - abar_t) eps` (cosine schedule, in the
 # prior's model space). This notebook makes x_t at t = 300 from corpus shapes, robotizes it with
 # Psi (oriented normals, robust reweighting, differentiable Poisson reconstruction, largest

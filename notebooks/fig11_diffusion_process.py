@@ -16,11 +16,11 @@
 # %% [markdown]
 # # Figure 11 — samples across diffusion time
 #
-# The prior (SPEC section 1) denoises a Gaussian cloud into a body in 1,024 training steps;
+# The prior (docs/method.md §1) denoises a Gaussian cloud into a body in 1,024 training steps;
 # dbtool samples it with strided DDIM and classifier-free guidance (scale 3). The sampler is a
 # generator that hands back control at chosen timesteps, so the intermediate clouds x_t at
 # t = 600, 400, 200 and the final x_0 come out of one run. These intermediate x_t are what the
-# co-design sampler robotizes and simulates at t = 400, 350, ... (SPEC section 5); the last
+# co-design sampler robotizes and simulates at t = 400, 350, ... (docs/method.md §5); the last
 # cell shows their robotized views.
 #
 # Quick mode (`DBTOOL_QUICK=1`, used in CI) draws one sample per prompt with 32 steps instead of
@@ -76,7 +76,7 @@ for prompt, ds in table.items():
 # %% [markdown]
 # ## Interpolating between two prompts
 #
-# The conditioning space is continuous, which is what embedding optimisation (SPEC section 4)
+# The conditioning space is continuous, which is what embedding optimisation (docs/method.md §4)
 # moves through. Spherical interpolation from the embedding of "a ball" to that of "a star",
 # sampled from the same initial noise at every point of the path, morphs one family into the
 # other. `dbtool prior evaluate` measures the same paths (share of samples nearest to each

@@ -18,7 +18,7 @@
 # %% [markdown]
 # # Figure 13 — human text feedback composed with co-design
 #
-# SPEC section 6: the co-design sampler sums two classifier-free guidance terms, one from the
+# docs/method.md §6: the co-design sampler sums two classifier-free guidance terms, one from the
 # embedding that embedding optimisation produced and one from a text prompt, each with its own
 # weight: `eps = eps(x, null) + s_c (eps(x, c) - eps(x, null)) + s_h (eps(x, c_human) -
 # eps(x, null))`. The paper's pairs are balancing + "a ball", crawling + "a star", hurdling +

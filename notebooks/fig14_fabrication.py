@@ -16,7 +16,7 @@
 # %% [markdown]
 # # Figure 14 — fabricating the gripper
 #
-# The paper's physical gripper (appendix G, SPEC section 8) is one designed finger and its mirror
+# The paper's physical gripper (appendix G, docs/method.md §8) is one designed finger and its mirror
 # copy under a rigid base, closed by underactuated tendons with four routing points per finger,
 # the tendons in Teflon tubes, printed in an elastomer with a Voronoi lattice foam inside the
 # fingers. `dbtool export` automates that path. This notebook exports the reference gripper
@@ -109,7 +109,7 @@ display(Markdown(report_markdown(rep)))
 # %% [markdown]
 # ## Voronoi lattice infill, cut open
 #
-# SPEC section 8: the fingers were filled with a Voronoi lattice foam (2.5 mm seed spacing,
+# docs/method.md §8: the fingers were filled with a Voronoi lattice foam (2.5 mm seed spacing,
 # 0.4 mm beams) inside a solid skin to soften them. `voronoi_infill` keeps the part one watertight
 # body (a small drain hole joins the cavity to the outside, as resin printing needs) and reports
 # its relative density. The cut below is the plane z = the finger's mid-depth.

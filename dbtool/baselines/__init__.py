@@ -1,1 +1,1 @@
-"""Baseline design representations optimised through the simulator (SPEC section 7)."""
+"""Baseline design representations optimised through the simulator (docs/method.md §7)."""

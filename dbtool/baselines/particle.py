@@ -1,4 +1,4 @@
-"""Particle-based baseline (SPEC section 7): per-particle geometry, softness and actuator
+"""Particle-based baseline (docs/method.md §7): per-particle geometry, softness and actuator
 logits in the task workspace, optimised by the simulator's gradients (design lr 0.01), with
 the open-loop controller co-optimised at the task's lr (Table 5's gamma).
 

@@ -1,1 +1,1 @@
-"""Co-design (SPEC sections 4-6): embedding optimisation and diffusion as co-design."""
+"""Co-design (docs/method.md §4-§6): embedding optimisation and diffusion as co-design."""

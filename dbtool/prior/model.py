@@ -1,6 +1,6 @@
 """Permutation-invariant latent-attention transformers for point-cloud diffusion.
 
-Point-E's models (SPEC section 1) are transformers over the points: each point is a token (no
+Point-E's models (docs/method.md §1) are transformers over the points: each point is a token (no
 positional encoding), the timestep and the condition are extra tokens, the output is epsilon per
 point. Full self-attention over 1,024 points costs 2.8-3.9 s per training step on this CPU
 (``MODEL_CARD.md``), so dbtool routes attention through a small set of learned

@@ -1,4 +1,4 @@
-"""Procedural, captioned corpus of soft-robot body shapes (SPEC section 1, the prior's data).
+"""Procedural, captioned corpus of soft-robot body shapes (docs/method.md §1, the prior's data).
 
 Each family builds a watertight solid with manifold3d from random parameters; the surface is
 sampled with trimesh. Shapes are built z-up (manifold3d's extrusion axis) and turned to the

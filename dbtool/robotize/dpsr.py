@@ -1,4 +1,4 @@
-"""Differentiable Poisson surface reconstruction (DPSR, Shape As Points; SPEC section 2).
+"""Differentiable Poisson surface reconstruction (DPSR, Shape As Points; docs/method.md §2).
 
 Oriented points define a vector field ``v`` (their normals splatted trilinearly onto a periodic
 ``res^3`` grid over the unit cube). The indicator ``chi`` whose gradient best matches ``v``

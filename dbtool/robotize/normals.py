@@ -1,4 +1,4 @@
-"""Oriented normals for unoriented, noisy clouds (SPEC section 2; input of DPSR).
+"""Oriented normals for unoriented, noisy clouds (docs/method.md §2; input of DPSR).
 
 1. Local PCA: the normal of point ``i`` is the eigenvector of the smallest eigenvalue of the
    covariance of its ``k`` nearest neighbours. It is a differentiable function of the positions

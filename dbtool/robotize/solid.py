@@ -1,4 +1,4 @@
-"""Solid fill (SPEC section 2): the indicator becomes per-particle occupancy on a task lattice.
+"""Solid fill (docs/method.md §2): the indicator becomes per-particle occupancy on a task lattice.
 
 Frames. Clouds live in the prior's frame (``[-0.5, 0.5]^3``, y up). DPSR works on the unit
 cube: ``u = 0.5 + x / SPAN`` with ``SPAN = 2``, so the prior's cube sits in ``[0.25, 0.75]^3``

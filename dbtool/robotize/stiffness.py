@@ -1,4 +1,4 @@
-"""Stiffness from geometry (SPEC section 2: a documented mapping; the paper hand-tunes it).
+"""Stiffness from geometry (docs/method.md §2: a documented mapping; the paper hand-tunes it).
 
 ``constant`` (default): every particle gets the simulator's default Young's modulus
 ``E0 = 3e4`` (SoftZoo's range is 1e4-1e5).

@@ -1,4 +1,4 @@
-"""Motion montages and animations of a rollout (SPEC section 10: Figures 3, 5, 9).
+"""Motion montages and animations of a rollout (the notebooks of Figures 3, 5 and 9).
 
 Headless: the Agg backend, nothing is shown on screen; files are written atomically.
 """
