@@ -15,7 +15,7 @@ from dbtool.sim.simulator import Particles, Scene, Simulator
 from dbtool.sim.tasks import get_task
 
 PRECISION = "f64"
-STEPS = 6  # control steps (x 17 substeps), several checkpoints deep
+STEPS = 6  # control steps (x SUBSTEPS substeps), several checkpoints deep
 # Central differences in float64. Contact (ground friction stick/slip) and roundoff bound
 # the useful step; eps sweeps show the residual is truncation/roundoff, below 1e-4 here.
 TOL = 1e-3
