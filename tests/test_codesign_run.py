@@ -14,7 +14,7 @@ from dbtool.codesign.design_run import DesignRun, RunError, Settings
 from dbtool.codesign.langevin import clip_rms, codesign_sample, rms, stops
 from dbtool.design import Design
 from dbtool.prior.pipeline import Prior
-from dbtool.provenance import config_hash
+from dbtool.provenance import config_hash, git_commit
 from dbtool.sim.tasks import get_task
 
 STEPS = 6  # control steps per episode: enough to exercise everything, cheap
@@ -107,7 +107,8 @@ def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp
     config = json.loads((tmp_path / "a" / "config.json").read_text())
     man = json.loads((tmp_path / "a" / "manifest.json").read_text())
     assert man["config_hash"] == config_hash(config)
-    assert len(man["commit"]) == 40 and isinstance(man["dirty"], bool)  # run from a checkout
+    # the code's commit: a checkout's HEAD, None for an installed package (as CI runs it)
+    assert (man["commit"], man["dirty"]) == tuple(git_commit().values())
     rows = [json.loads(line) for line in (tmp_path / "a" / "metrics.jsonl").open()]
     assert [r["epoch"] for r in rows if r["phase"] == "embedding"] == [0, 1]
     assert any(r["phase"] == "codesign" and "physics_rms" in r for r in rows)
