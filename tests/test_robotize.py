@@ -27,10 +27,11 @@ def cloud(family: str, n: int = 1024, index: int = 0):
 
 # IoU of the robotized clean cloud (1,024 points of the test split, index 0) with the mesh's
 # solid on the crawling lattice, as measured; each family must reach its measured IoU - 0.03.
-# Thin parts (star's points, table's legs, the U's arms) are a voxel or two wide, so they
-# score lowest.
+# Thin parts (star's points, table's legs, the U's arms, wings, a plate) are a voxel or two
+# wide, so they score lowest.
 CLEAN_IOU = {"ball": 0.991, "hook": 0.949, "arch": 0.933, "ring": 0.968, "quadruped": 0.900,
-             "cylinder": 0.977, "star": 0.881, "ushape": 0.832, "table": 0.803}
+             "cylinder": 0.977, "star": 0.881, "ushape": 0.832, "table": 0.803, "wings": 0.810,
+             "plate": 0.796}
 
 
 @pytest.mark.parametrize("family", list(CLEAN_IOU))
