@@ -57,6 +57,9 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
     The folder gets the permissions of a plain ``mkdir`` (``0o777`` less the umask).
     """
     path = Path(path)
+    for above in reversed(path.parents):  # outermost first: name the file that is in the way
+        if above.exists() and not above.is_dir():
+            raise NotADirectoryError(f"cannot make the folder {path}: {above} is a file")
     path.parent.mkdir(parents=True, exist_ok=True)
     if not os.access(path.parent, os.W_OK):
         raise PermissionError(f"cannot write to {path.parent}")

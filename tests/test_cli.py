@@ -114,7 +114,7 @@ def test_export_bad_input(tmp_path):
                str(tmp_path / "afile" / "export"))
     assert out.returncode != 0, out.stdout
     assert len(out.stderr.strip().splitlines()) == 1, out.stderr  # one line, no traceback
-    assert out.stderr.startswith("error:") and "afile" in out.stderr, out.stderr
+    assert out.stderr.startswith("error:") and "afile is a file" in out.stderr, out.stderr
     assert sorted(tmp_path.iterdir()) == before  # nothing written, not even a partial folder
     out = _run("export", "--design", str(tmp_path / "d.npz"), "--out", str(tmp_path / "afile"))
     assert out.returncode != 0 and out.stderr.startswith("error:"), out.stderr
