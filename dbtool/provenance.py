@@ -23,8 +23,9 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("dbtool", "numpy", "torch", "taichi")
 
 
-def _plain(o):
-    """JSON form of the values configs hold besides JSON's own (dataclasses, NumPy, paths)."""
+def json_default(o):
+    """JSON form of the values configs and metrics hold besides JSON's own (dataclasses, NumPy
+    and torch values, paths, sets); the ``default`` of :func:`json.dumps`."""
     if dataclasses.is_dataclass(o) and not isinstance(o, type):
         return dataclasses.asdict(o)
     if hasattr(o, "tolist"):  # NumPy arrays and scalars, torch tensors
@@ -33,12 +34,12 @@ def _plain(o):
         return str(o)
     if isinstance(o, (set, frozenset)):
         return sorted(o)
-    raise TypeError(f"cannot hash a {type(o).__name__} in a config")
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
 def canonical(config) -> str:
     """``config`` as canonical JSON: sorted keys, no spaces, tuples as lists."""
-    return json.dumps(config, sort_keys=True, separators=(",", ":"), default=_plain,
+    return json.dumps(config, sort_keys=True, separators=(",", ":"), default=json_default,
                       allow_nan=True)
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from dbtool.atomic import atomic_write_text
+from dbtool.provenance import json_default, provenance
 
 
 def seed_everything(seed: int) -> None:
@@ -66,25 +67,13 @@ def design_name(path: str | Path) -> str:
 
 def write_json(path: Path, obj) -> Path:
     """Write JSON atomically (temp file in the same folder, then rename)."""
-    return atomic_write_text(path, json.dumps(obj, indent=2, default=_default))
-
-
-def _default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+    return atomic_write_text(path, json.dumps(obj, indent=2, default=json_default))
 
 
 def manifest(seed: int, device: str, config: dict | None = None) -> dict:
     """Seed and device of a run, after its provenance (commit and dirty flag, hash of the
     resolved ``config``, time stamp, machine and versions; :func:`dbtool.provenance.provenance`,
     less the config itself, which ``config.json`` holds)."""
-    from dbtool.provenance import provenance
-
     prov = provenance({} if config is None else config)
     del prov["config"]
     return {**prov, "seed": seed, "device": device}
@@ -101,7 +90,7 @@ class RunDir:
 
     def log(self, **metrics) -> None:
         with open(self.path / "metrics.jsonl", "a") as fh:
-            fh.write(json.dumps(metrics, default=_default) + "\n")
+            fh.write(json.dumps(metrics, default=json_default) + "\n")
 
     def file(self, name: str) -> Path:
         return self.path / name
