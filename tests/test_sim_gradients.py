@@ -138,3 +138,60 @@ def test_gradient_episodes_are_bit_reproducible():
         for key in ("actions", "occupancy", "actuators"):
             np.testing.assert_array_equal(ro.grads[key], runs[0].grads[key], err_msg=key)
     assert np.abs(runs[0].grads["actions"]).max() > 0
+
+
+def test_gradients_with_damping_and_a_loss_read_along_the_episode():
+    """The tendon protocol's loss reads positions at several checkpoints of a damped,
+    clamped episode: the seeds at intermediate checkpoints and the damping's adjoint match
+    central differences, and both really change the loss."""
+    rng = np.random.default_rng(2)
+    side, sp = 6, 0.0025
+    g = (np.stack(np.meshgrid(*[np.arange(side)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5)
+    x0 = g * sp + np.array([0.05, 0.05, 0.05])
+    n = len(x0)
+    glued = (g[:, 1] > side - 1).astype(float)  # the top layer is clamped
+    wact = np.zeros((n, 4))
+    wact[:, 0] = (g[:, 0] < side / 2) * (1 - glued)
+    E = rng.uniform(2e4, 4e4, n)
+
+    def particles(e=E) -> Particles:
+        return Particles(x0=x0.copy(), phi=np.where(glued > 0, 100.0, 1.0), E=e.copy(),
+                         wact=wact.copy(), adir=np.tile([0, 1.0, 0], (n, 1)), glued=glued,
+                         v0=np.zeros((n, 3)))
+
+    scene = Scene(size=(0.15, 0.15, 0.15), friction=0.0, damping=200.0)
+    acts = -0.5 * np.abs(np.sin(np.arange(STEPS)[:, None] * 0.7 + np.arange(1)[None]))
+    reads = {2: rng.normal(size=(n, 3)), 4: rng.normal(size=(n, 3))}
+    final = rng.normal(size=(n, 3))
+
+    def loss(s: Simulator) -> float:
+        s.forward(acts)
+        x = s.positions()
+        return float(sum((x[t] * w).sum() for t, w in reads.items()) + (x[-1] * final).sum())
+
+    sim = Simulator(scene, particles(), n_steps=STEPS)
+    base = loss(sim)
+    grads = sim.backward(final, grad_x_steps=reads)
+    undamped = loss(Simulator(Scene(size=scene.size, friction=0.0), particles(), n_steps=STEPS))
+    print(f"without damping the loss changes by {abs(undamped - base):.3e}")
+    assert abs(undamped - base) > 1e-6
+    for name, eps in (("E", 1e-1), ("actions", 1e-5)):
+        d = rng.normal(size=E.shape if name == "E" else acts.shape)
+        if name == "E":
+            lp = loss(Simulator(scene, particles(E + eps * d), n_steps=STEPS))
+            lm = loss(Simulator(scene, particles(E - eps * d), n_steps=STEPS))
+            an = float((grads["E"] * d).sum())
+        else:
+            a0 = acts.copy()
+            acts = a0 + eps * d
+            lp = loss(sim)
+            acts = a0 - eps * d
+            lm = loss(sim)
+            acts = a0
+            an = float((grads["actions"][:, :1] * d).sum())
+        fd = (lp - lm) / (2 * eps)
+        rel = abs(fd - an) / max(abs(fd), 1e-12)
+        print(f"damped, read along the episode d/d{name}: fd={fd:.9e} analytic={an:.9e} "
+              f"rel.err={rel:.2e}")
+        assert abs(lp - lm) > 1e-10
+        assert rel < TOL

@@ -28,14 +28,24 @@ def _substep_adjoint(sp: Stepper, adj: Adjoint, s: int, r: Region) -> None:
         KA.g2p_grad(st.x, g.v, b.glued, adj.x, adj.v, adj.C, adj.scratch, s, n, sp.chunks, *r,
                     sc.dx, m.dt)
     KA.grid_op_grad(adj.scratch, g.m, g.vin, adj.grid, sp.boxes, s, sp.chunks, *sp.dims, *r,
-                    sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction)
+                    sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction, sc.damp(m.dt))
     KA.p2g_grad(*st, *b.stress, adj.grid, *adj.p2g, s, n, *r, *sp.consts)
 
 
+def _seed(adj: Adjoint, slot: int, g: np.ndarray) -> None:
+    """Add ``g`` to the position adjoint of substep ``slot``."""
+    x = adj.x.to_numpy()
+    x[slot] += g.astype(x.dtype)
+    adj.x.from_numpy(x)
+
+
 def backward(sp: Stepper, checkpoints: State, adj: Adjoint, regions: Sequence[Region],
-             grad_x: np.ndarray, grad_v: np.ndarray | None = None) -> dict[str, np.ndarray]:
+             grad_x: np.ndarray, grad_v: np.ndarray | None = None,
+             grad_x_steps: dict[int, np.ndarray] | None = None) -> dict[str, np.ndarray]:
     """Gradients of a loss whose gradient w.r.t. the final ``x`` (and ``v``) is given, after a
     forward pass that kept every control step's ``checkpoints`` and active ``regions``.
+    ``grad_x_steps[t]`` adds d loss / d the positions of checkpoint ``t`` (0 .. n_steps): a
+    loss read along the episode (the tendon protocol of docs/realgap.md).
 
     Returns d loss / d ``phi``, ``E``, ``wact``, ``actions``, ``x0`` and ``v0``.
     """
@@ -43,7 +53,8 @@ def backward(sp: Stepper, checkpoints: State, adj: Adjoint, regions: Sequence[Re
     for a in (body.phi, body.E, body.wact, body.act):
         a.grad.fill(0)
     seed_x = np.zeros((S + 1, n, 3), f)
-    seed_x[S] = grad_x
+    steps = dict(grad_x_steps or {})
+    seed_x[S] = grad_x + steps.pop(len(regions), 0.0)
     seed_v = np.zeros((S + 1, n, 3), f)
     if grad_v is not None:
         seed_v[S] = grad_v
@@ -60,6 +71,8 @@ def backward(sp: Stepper, checkpoints: State, adj: Adjoint, regions: Sequence[Re
         sp.segment(t, r, replay=True)
         if t < n_steps - 1:  # the adjoint at the start of step t + 1 ends step t
             adj.state.copy_to(adj.state, 0, S, n)
+            if t + 1 in steps:
+                _seed(adj, S, steps[t + 1])
         adj.actp.fill(0)
         for s in reversed(range(S)):
             _substep_adjoint(sp, adj, s, r)
@@ -70,6 +83,8 @@ def backward(sp: Stepper, checkpoints: State, adj: Adjoint, regions: Sequence[Re
         # Its per-particle wact.grad has no such race.
         g_act[t] = (wact * adj.actp.to_numpy().astype(np.float64)[:, None]).sum(0)
         K.actuation.grad(body.wact, body.act, body.actp, t, n)
+    if 0 in steps:
+        _seed(adj, 0, steps[0])
     return {
         "phi": adj.phi.to_numpy(),
         "E": adj.E.to_numpy(),

@@ -14,8 +14,8 @@ A substep is ``stress -> p2g -> grid_op -> g2p``:
 * ``p2g`` / ``g2p``: quadratic B-spline transfers. On the CPU the scatter runs in ``chunks``
   contiguous particle ranges, one per thread, each into its own copy of the grid with plain
   (non-atomic) adds; ``grid_op`` sums the copies.
-* ``grid_op``: momentum to velocity, gravity, ground and box colliders with Coulomb friction,
-  domain walls. Works on the active region ``[lo, hi)`` of the grid only.
+* ``grid_op``: momentum to velocity (times a damping factor, 1 unless the scene sets a
+  damping rate), gravity, ground and box colliders with Coulomb friction, domain walls. Works on the active region ``[lo, hi)`` of the grid only.
 
 The arguments come in a fixed order, built by the containers of :mod:`dbtool.sim.state`:
 particle state ``(x, v, C, F)``, body fields ``(phi, E, actp, adir)``, grid arrays, the slot
@@ -226,9 +226,10 @@ def grid_op(
     scratch: nd(), grid_m: nd(), grid_vin: nd(), grid_v: nd(), boxes: nd(),
     s: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
-    dx: float, dt: float, gravity: float, ground_y: float, mu_f: float,
+    dx: float, dt: float, gravity: float, ground_y: float, mu_f: float, damp: float,
 ):
-    """Sum the p2g copies (and clear them), then velocity update and boundary conditions."""
+    """Sum the p2g copies (and clear them), then velocity update and boundary conditions;
+    ``damp`` scales the velocity each substep (mass-proportional damping; 1 = none)."""
     for i, j, k in ti.ndrange((lx, hx), (ly, hy), (lz, hz)):
         acc = ti.Vector([0.0, 0.0, 0.0, 0.0])
         for c in range(chunks):
@@ -238,7 +239,7 @@ def grid_op(
         vin = ti.Vector([0.0, 0.0, 0.0])
         vout = ti.Vector([0.0, 0.0, 0.0])
         if m > 0.0:
-            vin = ti.Vector([acc[0], acc[1], acc[2]]) / m
+            vin = ti.Vector([acc[0], acc[1], acc[2]]) / m * damp
             vin[1] -= dt * gravity
             I = ti.Vector([i, j, k])
             _v0, _v1, _v2, v3 = _colliders(I * dx, vin, boxes, ground_y, mu_f)

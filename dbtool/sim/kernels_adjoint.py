@@ -150,7 +150,7 @@ def grid_op_grad(
     gscratch: nd(), grid_m: nd(), grid_vin: nd(), ggrid: nd(), boxes: nd(),
     s: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
-    dx: float, dt: float, gravity: float, ground_y: float, mu_f: float,
+    dx: float, dt: float, gravity: float, ground_y: float, mu_f: float, damp: float,
 ):
     """Adjoint of :func:`grid_op`: ``ggrid = (dL/d mv, dL/d m)`` from the g2p adjoints."""
     for i, j, k in ti.ndrange((lx, hx), (ly, hy), (lz, hz)):
@@ -170,9 +170,10 @@ def grid_op_grad(
             g = _friction_vjp(v1, _box_normal(pos, boxes, 0), mu_f, g)
             if pos[1] <= ground_y:
                 g = _friction_vjp(v0, ti.Vector([0.0, 1.0, 0.0]), mu_f, g)
-            # vin = mv / m - dt g e_y  =>  dL/dmv = g / m,  dL/dm = -g . (mv / m) / m
+            # vin = c mv / m - dt g e_y  =>  dL/dmv = c g / m,  dL/dm = -g . (c mv / m) / m
             vm = vin + ti.Vector([0.0, dt * gravity, 0.0])
-            out = ti.Vector([g[0] / m, g[1] / m, g[2] / m, -g.dot(vm) / m])
+            gd = g / m * damp
+            out = ti.Vector([gd[0], gd[1], gd[2], -g.dot(vm) / m])
         ggrid[i, j, k] = out
 
 

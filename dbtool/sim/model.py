@@ -19,7 +19,8 @@ class Scene:
 
     ``size`` is the domain extent (x, y = gravity axis, z), its origin at 0; ``boxes`` are static
     colliders ``(center, half_extent)``; the ground is the plane ``y = ground_y`` with Coulomb
-    friction coefficient ``friction``.
+    friction coefficient ``friction``; ``damping`` is a mass-proportional damping rate (0 for
+    every task).
     """
 
     size: tuple[float, float, float]
@@ -30,6 +31,12 @@ class Scene:
     )
     friction: float = 0.5
     gravity: float = 9.8
+    damping: float = 0.0
+
+    def damp(self, dt: float) -> float:
+        """Velocity factor per substep of the mass-proportional ``damping`` rate (1/time):
+        ``exp(-damping dt)``; 1 (no damping) for every task, used by quasi-static protocols."""
+        return math.exp(-self.damping * dt) if self.damping else 1.0
 
     @property
     def grid(self) -> tuple[int, int, int]:

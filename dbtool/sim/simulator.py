@@ -155,8 +155,10 @@ class Simulator:
         """Positions and velocities after the last control step."""
         return {"x": self.state.x.to_numpy()[0], "v": self.state.v.to_numpy()[0]}
 
-    def backward(self, grad_x: np.ndarray, grad_v: np.ndarray | None = None) -> dict:
-        """Reverse pass for a loss whose gradient w.r.t. the final ``x`` (and ``v``) is given.
+    def backward(self, grad_x: np.ndarray, grad_v: np.ndarray | None = None,
+                 grad_x_steps: dict[int, np.ndarray] | None = None) -> dict:
+        """Reverse pass for a loss whose gradient w.r.t. the final ``x`` (and ``v``) is given;
+        ``grad_x_steps[t]`` adds the gradient w.r.t. the positions of checkpoint ``t``.
 
         Returns d loss / d ``phi``, ``E``, ``wact``, ``actions``, ``x0`` and ``v0``.
         """
@@ -165,7 +167,7 @@ class Simulator:
         if len(self.regions) != self.n_steps:
             raise RuntimeError("call forward() before backward()")
         return backward(self.stepper, self.checkpoints, self.adjoint, self.regions, grad_x,
-                        grad_v)
+                        grad_v, grad_x_steps)
 
 
 def peak_rss_mb() -> float:
