@@ -8,6 +8,7 @@ import typer
 
 from dbtool.cli_common import ProgressBar, guarded
 from dbtool.cli_prior import prior_app
+from dbtool.cli_realgap import realgap_app
 from dbtool.codesign.config import PROMPT_T_MIN
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
@@ -15,6 +16,7 @@ app = typer.Typer(add_completion=False, no_args_is_help=True,
                        "MPM simulator (DiffuseBot).")
 TASK_NAMES = "balancing, landing, crawling, hurdling, gripping, box"
 app.add_typer(prior_app, name="prior")
+app.add_typer(realgap_app, name="realgap")
 
 
 @app.command()

@@ -15,7 +15,8 @@ A substep is ``stress -> p2g -> grid_op -> g2p``:
   contiguous particle ranges, one per thread, each into its own copy of the grid with plain
   (non-atomic) adds; ``grid_op`` sums the copies.
 * ``grid_op``: momentum to velocity (times a damping factor, 1 unless the scene sets a
-  damping rate), gravity, ground and box colliders with Coulomb friction, domain walls. Works on the active region ``[lo, hi)`` of the grid only.
+  damping rate), gravity, ground and box colliders with Coulomb friction, domain walls.
+  Works on the active region ``[lo, hi)`` of the grid only.
 
 The arguments come in a fixed order, built by the containers of :mod:`dbtool.sim.state`:
 particle state ``(x, v, C, F)``, body fields ``(phi, E, actp, adir)``, grid arrays, the slot

@@ -1,0 +1,100 @@
+"""The tendon protocol on the reference gripper (docs/realgap.md): closing, return, rest tip
+distance against the exported meshes, exact replay, the tendon map and calibration."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dbtool.realgap.calibrate import calibrate
+from dbtool.realgap.fingertips import mesh_tip_distance
+from dbtool.realgap.log import TipLog, read_log
+from dbtool.realgap.protocol import (
+    TendonParams,
+    actuation,
+    play,
+    simulate_log,
+    standard_schedule,
+)
+from dbtool.realgap.run import open_bench, replay, simulate
+
+REF = Path(__file__).resolve().parents[1] / "exports" / "gripping-seed0"
+RETURN_TOL_MM = 0.5  # release back to 0 ends this close to the start (measured 0.28)
+REST_TOL_MM = 0.5  # simulated rest vs the exported meshes' fingertips (measured 0.15)
+
+
+@pytest.fixture(scope="module")
+def bench():
+    return open_bench(REF)
+
+
+@pytest.fixture(scope="module")
+def standard(bench) -> TipLog:
+    b, meta = bench
+    return simulate_log(b, standard_schedule(2.0, 10.0), TendonParams(), meta)
+
+
+def test_play_and_the_tendon_map():
+    d = np.array([0, 2, 4, 6, 4, 2, 0], float)
+    assert play(d, 0.0).tolist() == d.tolist()
+    # a dead band of half-width 1: the finger lags 1 mm on the pull, then waits 2 mm
+    assert play(d, 1.0).tolist() == [0, 1, 3, 5, 5, 3, 1]
+    a = actuation(d, TendonParams(), 30.0, 0.2, 0.3)
+    assert a[0] == 0.0 and np.all(a[1:4] < 0) and np.all(np.diff(a[:4]) < 0)
+    assert a.tolist() == actuation(d[::-1], TendonParams(), 30.0, 0.2, 0.3)[::-1].tolist()
+    slack = actuation(d, TendonParams(slack_mm=2.5), 30.0, 0.2, 0.3)
+    assert slack[1] == 0.0 and slack[2] < 0 and slack[2] > a[2]
+    with pytest.raises(ValueError, match="gain"):
+        TendonParams(gain=0.0)
+    with pytest.raises(ValueError, match="friction_mm"):
+        TendonParams(friction_mm=-1.0)
+
+
+def test_flexion_closes_monotonically_and_release_returns(standard):
+    fl = standard.curves["flexion"]
+    _, pull = fl.branch("pull")
+    _, rel = fl.branch("release")
+    print("flexion", np.round(fl.tip, 3), "\nextension", np.round(standard.curves["extension"].tip,
+                                                                     3))
+    assert np.all(np.diff(pull) < 0), "pulling the flexion tendon must close the fingers"
+    assert pull[0] - pull[-1] > 2.0  # measured 3.6 mm over 10 mm of tendon
+    assert np.all(np.diff(rel) > 0)
+    assert abs(rel[-1] - pull[0]) < RETURN_TOL_MM
+    _, ext = standard.curves["extension"].branch("pull")
+    assert np.all(np.diff(ext) > 0), "pulling the extension tendon must open the fingers"
+    assert "settling" in standard.meta and standard.meta["source"] == "sim"
+
+
+def test_rest_tip_distance_matches_the_exported_fingertips(standard):
+    mesh = mesh_tip_distance(REF)
+    rest = standard.curves["flexion"].tip[0]
+    print(f"rest: simulated {rest:.3f} mm, exported meshes {mesh:.3f} mm")
+    assert mesh is not None and abs(rest - mesh) < REST_TOL_MM
+
+
+def test_replaying_a_simulated_log_against_its_own_design_is_exact(tmp_path):
+    params = TendonParams(gain=1.2, friction_mm=0.5)
+    simulate(REF, params, tmp_path / "sim.csv", step_mm=5.0, max_mm=10.0)
+    logged = read_log(tmp_path / "sim.csv")
+    assert logged.meta["source"] == "sim" and logged.meta["design"] == "gripping-seed0"
+    report, out = replay(tmp_path / "sim.csv", REF, params, tmp_path / "same")
+    assert report["overall"]["rmse_mm"] == 0.0
+    assert report["largest_deviation"]["abs_deviation_mm"] == 0.0
+    for name in ("sim.csv", "report.json", "report.md", "fig16.png", "config.json",
+                 "manifest.json"):
+        assert (out / name).stat().st_size > 0
+    other, _ = replay(tmp_path / "sim.csv", REF, TendonParams(), tmp_path / "other")
+    print("default parameters against gain 1.2, friction 0.5:", other["overall"]["rmse_mm"])
+    assert other["overall"]["rmse_mm"] > 0.05
+
+
+def test_calibration_recovers_a_hidden_gain(bench):
+    b, meta = bench
+    schedule = {"flexion": standard_schedule(5.0, 10.0)["flexion"]}
+    hidden = TendonParams(gain=1.3)
+    log = simulate_log(b, schedule, hidden, meta, hold=40)
+    cal = calibrate(b, log, TendonParams(), names=("gain",), max_evals=8, hold=40)
+    print(f"gain {cal.params.gain:.4f} ± {cal.stderr['gain']}, RMSE {cal.rmse_before_mm:.4f} "
+          f"-> {cal.rmse_after_mm:.4f} mm in {cal.evaluations} evaluations, {cal.wall_s:.0f} s")
+    assert abs(cal.params.gain - 1.3) / 1.3 < 0.05
+    assert cal.rmse_after_mm < 0.2 * cal.rmse_before_mm
