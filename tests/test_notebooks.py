@@ -41,7 +41,8 @@ QUICK_SETTINGS = {
         ("N_STEPS", 20, 100), ("SAMPLE_STEPS", 16, 32), ("cod.t_max", 200, 400)],
     "fig14_fabrication": [("finger.bounding_box()[4] - finger.bounding_box()[1]", 20.0, 60.0)],
     "fig16_sim_vs_real": [("TENDONS", ("flexion",), ("flexion", "extension")),
-                          ("MAX_EVALS", 3, 15)],
+                          ("FIT", ("gain", "friction_mm"),
+                           ("gain", "stiffness_scale", "friction_mm")), ("MAX_EVALS", 8, 20)],
 }
 
 

@@ -23,8 +23,8 @@ import numpy as np
 from dbtool.realgap.log import Curve, TipLog, write_log
 from dbtool.realgap.protocol import TendonParams, simulate_log, standard_schedule
 
-HIDDEN = TendonParams(gain=1.3, stiffness_scale=1.0, friction_mm=0.8, slack_mm=0.0)
-RELEASE_JUMP = 0.4
+HIDDEN = TendonParams(gain=1.3, stiffness_scale=1.0, friction_mm=1.2, slack_mm=0.0)
+RELEASE_JUMP = 0.1
 NOISE_MM = 0.1
 SEED = 16
 DESIGN = Path("exports/gripping-seed0")
