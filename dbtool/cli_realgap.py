@@ -73,6 +73,7 @@ def realgap_calibrate(
 ) -> None:
     """Fit the tendon map to a log through the differentiable simulator; writes params.json."""
     from dbtool.realgap.calibrate import BOUNDS
+    from dbtool.realgap.log import read_log
     from dbtool.realgap.run import calibrate_log
 
     names = tuple(n.strip() for n in fit.split(",") if n.strip())
@@ -86,8 +87,11 @@ def realgap_calibrate(
             p = ", ".join(f"{n} {h['params'][n]:.4g}" for n in names)
             typer.echo(f"  RMSE {h['rmse_mm']:.4f} mm  ({p})", err=True)
 
+        logged = read_log(log)
         cal, folder = calibrate_log(log, design, out, names=names, max_evals=max_evals,
-                                    progress=show)
+                                    progress=show, logged=logged)
+    for w in logged.warnings:
+        typer.secho(f"warning: {w}", err=True, fg=typer.colors.YELLOW)
     fitted = ", ".join(f"{n} = {getattr(cal.params, n):.4g} ± "
                        f"{cal.stderr[n]:.2g}" if cal.stderr[n] is not None else
                        f"{n} = {getattr(cal.params, n):.4g}" for n in names)

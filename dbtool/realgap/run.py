@@ -4,7 +4,6 @@ simulation and writes its files atomically."""
 
 from __future__ import annotations
 
-import json
 import os
 import time
 from collections.abc import Callable
@@ -95,10 +94,10 @@ def calibrate_log(log_path: str | Path, design: str | Path, out: str | Path | No
                   start: TendonParams | None = None, names: tuple[str, ...] = FIT,
                   max_evals: int = 20, config: BenchConfig | None = None,
                   progress: Callable[[dict], object] | None = None,
-                  ) -> tuple[Calibration, Path]:
+                  logged: TipLog | None = None) -> tuple[Calibration, Path]:
     """Fit the tendon map to a log; writes ``params.json`` (fitted values, standard errors,
     RMSE before and after, history) and the replays before and after in ``out``."""
-    logged = read_log(log_path)
+    logged = logged or read_log(log_path)
     out = check_writable(out or default_run_dir("realgap-calibrate"), folder=True)
     bench, meta = open_bench(design, config)
     check_design(logged, meta["design"], meta["design_sha"])
@@ -136,6 +135,3 @@ def summary(report: dict) -> str:
         lines.append(f"{t}: RMSE {r['rmse_mm']:.3f} mm ({br})")
     return "\n".join(lines)
 
-
-__all__ = ["calibrate_log", "check_writable", "load_params", "open_bench", "replay",
-           "simulate", "summary", "json"]
