@@ -169,7 +169,10 @@ class Bench:
         self.plane = task.origin()[2] + FULL[2] / 2
         self.E0 = p.E[idx].astype(float)
         self.material = Material(density=task.material.density / self.cfg.mass_scale)
-        self.tips = np.flatnonzero(np.isin(idx, ep.info["tips"][1]) & ~clamp)
+        self.tips = np.flatnonzero(np.isin(idx, ep.info["tips"].get(1, [])) & ~clamp)
+        if not len(self.tips) or clamp.all():
+            raise ValueError("the design's finger is too short for the tendon bench: its tip "
+                             "lies within one grid cell of its root")
         self.particles = Particles(
             x0=x0, phi=np.where(clamp, CLAMP, p.phi[idx]), E=self.E0.copy(),
             wact=np.where(clamp[:, None], 0.0, p.wact[idx]), adir=p.adir[idx],
