@@ -125,6 +125,19 @@ def tendon_groups(design_path: str | Path, design: Design) -> dict[str, int]:
     return groups
 
 
+def export_scale(design_path: str | Path) -> float:
+    """mm per simulation unit: the export's (its ``report.json``) when the design comes from
+    an export folder, else the default export scale."""
+    p = Path(design_path)
+    report = (p if p.is_dir() else p.parent) / "report.json"
+    if report.is_file():
+        try:
+            return float(json.loads(report.read_text()).get("mm_per_sim_unit", MM_PER_UNIT))
+        except (ValueError, TypeError):
+            pass
+    return MM_PER_UNIT
+
+
 def play(displacement: np.ndarray, width: float) -> np.ndarray:
     """Play (backlash) operator of half-width ``width`` started at 0, clipped at 0: what the
     channel's friction lets through of a displacement sequence."""

@@ -17,6 +17,7 @@ from dbtool.realgap.protocol import (
     BenchConfig,
     TendonParams,
     design_sha,
+    export_scale,
     load_gripper,
     simulate_log,
     standard_schedule,
@@ -48,7 +49,7 @@ def open_bench(design: str | Path, config: BenchConfig | None = None,
     """The bench of a gripper design and the metadata that ties a log to it."""
     d, name = load_gripper(design)
     runtime.init(arch)
-    bench = Bench(d, tendon_groups(design, d), config)
+    bench = Bench(d, tendon_groups(design, d), config, export_scale(design))
     return bench, {"design": name, "design_sha": design_sha(d)}
 
 
