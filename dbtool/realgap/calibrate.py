@@ -109,9 +109,12 @@ def readings(bench: Bench, log: TipLog, params: TendonParams, hold: int) -> np.n
 
 def calibrate(bench: Bench, log: TipLog, start: TendonParams | None = None,
               names: tuple[str, ...] = FIT, max_evals: int = 20, hold: int | None = None,
-              progress: Callable[[dict], object] | None = None) -> Calibration:
+              progress: Callable[[dict], object] | None = None,
+              tol_mm: float = 1e-3) -> Calibration:
     """Fit ``names`` of the tendon map to ``log`` from ``start`` (the defaults) in at most
-    ``max_evals`` simulator gradient evaluations; the best parameters evaluated are kept."""
+    ``max_evals`` simulator gradient evaluations, stopping early once the RMSE is below
+    ``tol_mm`` (a micron: far below what a log can resolve); the best parameters evaluated
+    are kept."""
     t0 = time.perf_counter()
     start = start or TendonParams()
     if hold is None:
@@ -135,7 +138,8 @@ def calibrate(bench: Bench, log: TipLog, start: TendonParams | None = None,
     def evaluate(u: np.ndarray) -> tuple[float, np.ndarray]:
         key = tuple(np.round(u, 12))
         if key not in cache:
-            if len(history) >= max_evals:
+            if len(history) >= max_evals or (history and min(
+                    h["rmse_mm"] for h in history) < tol_mm):
                 raise _Spent
             raw = theta(u)
             p = replace(start, **{n: float(v) for n, v in zip(names, np.clip(raw, lo, hi),
@@ -160,8 +164,8 @@ def calibrate(bench: Bench, log: TipLog, start: TendonParams | None = None,
     try:
         minimize(f, np.zeros(len(names)), jac=True, method="L-BFGS-B",
                  options={"maxfun": max_evals, "maxiter": max_evals})
-    except _Spent:  # L-BFGS-B may ask for more evaluations than maxfun inside a line search
-        pass
+    except _Spent:  # the budget is spent (L-BFGS-B may ask for more than maxfun inside a line
+        pass        # search) or the fit is exact to tol_mm
     best = min(history, key=lambda h: h["rmse_mm"])
     fitted = TendonParams(**best["params"])
     stderr = _stderr(bench, log, fitted, names, hold)
