@@ -42,7 +42,7 @@ QUICK_SETTINGS = {
     "fig14_fabrication": [("finger.bounding_box()[4] - finger.bounding_box()[1]", 20.0, 60.0)],
     "fig16_sim_vs_real": [("TENDONS", ("flexion",), ("flexion", "extension")),
                           ("FIT", ("gain", "friction_mm"),
-                           ("gain", "stiffness_scale", "friction_mm")), ("MAX_EVALS", 8, 20)],
+                           ("gain", "stiffness_scale", "friction_mm")), ("MAX_EVALS", 4, 20)],
 }
 
 
