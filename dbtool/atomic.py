@@ -79,3 +79,20 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def check_writable(path: str | Path, folder: bool = False) -> Path:
+    """Fail early (``OSError``, one line) when ``path`` (a file, or a ``folder``) cannot be
+    written, before any work and without creating anything."""
+    path = Path(path)
+    target = path if folder else path.parent
+    probe = target
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir():
+        raise OSError(f"cannot write {path}: {probe} is not a folder")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise OSError(f"cannot write {path}: {probe} is not writable")
+    if not folder and path.is_dir():
+        raise OSError(f"cannot write {path}: it is a folder")
+    return path

@@ -11,6 +11,7 @@ from dbtool.cli_common import guarded
 
 realgap_app = typer.Typer(no_args_is_help=True,
                           help="Sim vs real: the gripper's tendon protocol (Figure 16).")
+LOG_HELP = "a tip-distance log (CSV, docs/realgap.md)"
 DESIGN_HELP = "a gripper: run folder, export folder (e.g. exports/gripping-seed0) or design.npz"
 
 
@@ -41,7 +42,7 @@ def realgap_simulate(
 
 @realgap_app.command("replay")
 def realgap_replay(
-    log: Path = typer.Argument(..., help="a tip-distance log (CSV, docs/realgap.md)"),
+    log: Path = typer.Argument(..., help=LOG_HELP),
     design: Path = typer.Option(..., help=DESIGN_HELP),
     params: Path = typer.Option(None, help="params.json from `dbtool realgap calibrate`"),
     out: Path = typer.Option(None, "-o", "--out", help="run folder (default "
@@ -63,7 +64,7 @@ def realgap_replay(
 
 @realgap_app.command("calibrate")
 def realgap_calibrate(
-    log: Path = typer.Argument(..., help="a tip-distance log (CSV, docs/realgap.md)"),
+    log: Path = typer.Argument(..., help=LOG_HELP),
     design: Path = typer.Option(..., help=DESIGN_HELP),
     out: Path = typer.Option(None, "-o", "--out", help="run folder (default "
                                                        "runs/realgap-calibrate-TIME)"),

@@ -19,6 +19,7 @@ import numpy as np
 
 from dbtool.design import Design, DesignFileError
 from dbtool.realgap.log import TENDONS, Curve, TipLog
+from dbtool.runs import design_name
 from dbtool.sim.robot import Robot
 from dbtool.sim.simulator import Material, Particles, Simulator
 from dbtool.sim.tasks.base import DX, SPACING
@@ -104,7 +105,7 @@ def load_gripper(path: str | Path) -> tuple[Design, str]:
                                   "a `dbtool export` folder has one)")
         name, p = p.name, p / "design.npz"
     else:
-        name = p.parent.name if p.name == "design.npz" else p.stem
+        name = design_name(p)
     design = Design.load(p)
     if design.task != "gripping":
         raise DesignFileError(f"{path} is a {design.task} design, not a gripper: the tendon "

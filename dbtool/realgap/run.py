@@ -4,12 +4,12 @@ simulation and writes its files atomically."""
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
 
+from dbtool.atomic import check_writable
 from dbtool.realgap.calibrate import FIT, Calibration, calibrate
 from dbtool.realgap.log import TENDONS, TipLog, check_design, read_log, write_log
 from dbtool.realgap.protocol import (
@@ -26,22 +26,6 @@ from dbtool.realgap.protocol import (
 from dbtool.realgap.report import compare, plot, write_report
 from dbtool.runs import RunDir, default_run_dir, write_json
 from dbtool.sim import runtime
-
-
-def check_writable(path: str | Path, folder: bool = False) -> Path:
-    """Fail early (``OSError``, one line) when ``path`` cannot be written."""
-    path = Path(path)
-    target = path if folder else path.parent
-    probe = target
-    while not probe.exists():
-        probe = probe.parent
-    if not probe.is_dir():
-        raise OSError(f"cannot write {path}: {probe} is not a folder")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise OSError(f"cannot write {path}: {probe} is not writable")
-    if not folder and path.is_dir():
-        raise OSError(f"cannot write {path}: it is a folder")
-    return path
 
 
 def open_bench(design: str | Path, config: BenchConfig | None = None,
