@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from dbtool.cli_common import ProgressBar, guarded
+from dbtool.cli_compare import compare_command
 from dbtool.cli_prior import prior_app
 from dbtool.cli_realgap import realgap_app
 from dbtool.codesign.config import PROMPT_T_MIN
@@ -17,6 +18,7 @@ app = typer.Typer(add_completion=False, no_args_is_help=True,
 TASK_NAMES = "balancing, landing, crawling, hurdling, gripping, box"
 app.add_typer(prior_app, name="prior")
 app.add_typer(realgap_app, name="realgap")
+app.command("compare")(compare_command)
 
 
 @app.command()

@@ -13,7 +13,8 @@ PRECISIONS = ("f32", "f64")
 
 
 def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None) -> None:
-    """Initialise Taichi once per (arch, precision); re-initialise only when they change.
+    """Initialise Taichi once per (arch, precision); re-initialise only when they change or
+    when ``threads`` is given and differs from the running count.
 
     ``arch``: ``cpu`` (default), ``cuda`` or ``auto`` (GPU when available). ``precision``: the
     floating-point type of every kernel and array (``f64`` is used by the gradient checks).
@@ -24,7 +25,7 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None) 
     if precision not in PRECISIONS:
         raise ValueError(f"unknown precision {precision!r}; choose one of {', '.join(PRECISIONS)}")
     key = (arch, precision)
-    if _STATE.get("key") == key:
+    if _STATE.get("key") == key and (threads is None or threads == _STATE.get("threads")):
         return
     if "key" in _STATE:
         ti.reset()

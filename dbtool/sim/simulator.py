@@ -21,8 +21,12 @@ from dbtool.sim.model import SUBSTEPS, Material, Particles, Scene
 from dbtool.sim.state import Adjoint, ArrayPool, Body, Grid, State
 from dbtool.sim.stepper import Region, SimulationError, Stepper
 
-__all__ = ["SUBSTEPS", "Material", "Particles", "Scene", "SimulationError", "Simulator",
-           "peak_rss_mb"]
+__all__ = ["EPISODES", "SUBSTEPS", "Material", "Particles", "Scene", "SimulationError",
+           "Simulator", "peak_rss_mb"]
+
+# Episodes this process has run (forward passes, backward passes): the comparison's budget
+# is counted from them (docs/results.md).
+EPISODES = {"forward": 0, "backward": 0}
 
 
 class Simulator:
@@ -132,6 +136,7 @@ class Simulator:
         ``progress(1)`` as each control step finishes."""
         if actions is not None:
             self.set_actions(actions)
+        EPISODES["forward"] += 1
         self._initial_state()
         S, sp = self.substeps, self.stepper
         self.regions = []
@@ -166,6 +171,7 @@ class Simulator:
             raise RuntimeError("this Simulator was built with requires_grad=False")
         if len(self.regions) != self.n_steps:
             raise RuntimeError("call forward() before backward()")
+        EPISODES["backward"] += 1
         return backward(self.stepper, self.checkpoints, self.adjoint, self.regions, grad_x,
                         grad_v, grad_x_steps)
 

@@ -1,0 +1,53 @@
+"""``dbtool compare``: DiffuseBot against the baselines on a fair budget (docs/results.md,
+docs/cluster.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from dbtool.cli_common import guarded
+
+
+def compare_command(
+    tasks: list[str] = typer.Option(None, "--tasks", help="tasks (default: all six)"),
+    methods: list[str] = typer.Option(None, "--methods", help="particle, voxel, implicit, "
+                                      "cppn, prior, diffusebot or all (default: all)"),
+    seeds: list[int] = typer.Option(None, "--seeds", help="seeds (default: 0)"),
+    budget: str = typer.Option(None, help="smoke, quick or paper (default quick)"),
+    executor: str = typer.Option("serial", help="serial, local (processes here) or ray"),
+    workers: int = typer.Option(2, help="worker processes (local) or CPUs of a private Ray "
+                                "instance"),
+    address: str = typer.Option(None, help="Ray cluster to join: HOST:PORT or auto"),
+    threads: int = typer.Option(None, help="CPU threads per cell (default 1; part of what "
+                                "makes numbers reproducible)"),
+    out: Path = typer.Option(None, "--out", "-o", help="comparison folder (default "
+                             "runs/compare-BUDGET-TIME)"),
+    resume: bool = typer.Option(False, help="finish the comparison in --out: skip finished "
+                                "cells, rerun failed ones, add new ones"),
+) -> None:
+    """Run the methods x tasks x seeds table: one folder per cell, results.csv, table.md,
+    bar chart and the Figure-12 grid of robots."""
+    from dbtool.compare.executors import ExecutorError
+    from dbtool.compare.run import CompareConfig, compare, stored_config
+    from dbtool.runs import default_run_dir
+
+    with guarded(ExecutorError):
+        if resume and out is None:
+            raise ValueError("--resume needs --out, the comparison folder to finish")
+        base = stored_config(out) if resume else {}
+        cfg = CompareConfig(
+            tasks=list(tasks) if tasks else base.get("tasks", ["all"]),
+            methods=list(methods) if methods else base.get("methods", ["all"]),
+            seeds=list(seeds) if seeds else base.get("seeds", [0]),
+            budget=budget or base.get("budget", "quick"),
+            threads=threads or base.get("threads", 1))
+        out = out or default_run_dir(f"compare-{cfg.budget}")
+        res = compare(cfg, out, executor, workers, address, resume, echo=typer.echo)
+    typer.echo(f"{res['done']} cells done, {res['failed']} failed, {res['skipped']} already "
+               f"finished: {out}")
+    for name, path in res["report"].items():
+        typer.echo(f"{name}: {path}")
+    if res["failed"]:
+        raise typer.Exit(code=1)

@@ -1,0 +1,1 @@
+"""The comparison of DiffuseBot with the baselines (docs/results.md)."""

@@ -1,0 +1,193 @@
+"""``dbtool compare``: the main comparison table (docs/results.md) as a resumable folder::
+
+    OUT/compare.json   format, budget, thread count and every cell asked for so far
+    OUT/manifest.json  provenance of the first invocation (commit, machine, versions)
+    OUT/results.csv    one row per finished or failed cell (rewritten as cells finish)
+    OUT/table.md, bars.png, robots.png   the report (dbtool/compare/report.py)
+    OUT/cells/METHOD-TASK-sSEED/          one folder per cell (dbtool/compare/cells.py)
+
+A new comparison refuses a folder that holds anything. ``--resume`` skips finished cells, runs
+failed and missing ones again and may add cells (more tasks, methods or seeds) on the same
+budget.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from dbtool.atomic import atomic_write_text
+from dbtool.compare.budget import get_budget
+from dbtool.compare.cells import CellSpec, read_cell
+from dbtool.compare.executors import check_executor, execute
+from dbtool.compare.methods import METHODS
+from dbtool.sim.tasks import TASKS
+
+FORMAT = "dbtool.compare/1"
+COLUMNS = ("method", "task", "seed", "status", "metric", "budget_units", "budget_used",
+           "forward_episodes", "gradient_episodes", "wall_s", "worker", "commit", "error")
+
+
+class CompareError(ValueError):
+    """Bad options or a folder that cannot be used; the message is one line."""
+
+
+@dataclass
+class CompareConfig:
+    """Settings of one ``dbtool compare`` invocation."""
+
+    tasks: list[str] = field(default_factory=lambda: list(TASKS))
+    methods: list[str] = field(default_factory=lambda: list(METHODS))
+    seeds: list[int] = field(default_factory=lambda: [0])
+    budget: str = "quick"
+    threads: int = 1
+    arch: str = "cpu"
+
+    def __post_init__(self) -> None:
+        if self.methods == ["all"]:
+            self.methods = list(METHODS)
+        if self.tasks == ["all"]:
+            self.tasks = list(TASKS)
+        for m in self.methods:
+            if m not in METHODS:
+                raise CompareError(f"unknown method {m!r}; choose from {', '.join(METHODS)} "
+                                   "or all")
+        for t in self.tasks:
+            if t not in TASKS:
+                raise CompareError(f"unknown task {t!r}; choose from {', '.join(TASKS)} or all")
+        try:
+            get_budget(self.budget)
+        except ValueError as exc:
+            raise CompareError(str(exc)) from None
+        if not self.seeds or any(s < 0 for s in self.seeds):
+            raise CompareError("seeds must be one or more non-negative integers")
+        if self.threads < 1:
+            raise CompareError(f"threads must be at least 1, got {self.threads}")
+
+    def cells(self) -> list[tuple[str, str, int]]:
+        return [(m, t, s) for t in self.tasks for m in self.methods for s in self.seeds]
+
+
+def _order(cells: list[tuple[str, str, int]]) -> list[list]:
+    key = {m: i for i, m in enumerate(METHODS)}
+    tkey = {t: i for i, t in enumerate(TASKS)}
+    uniq = {tuple(c) for c in cells}
+    return [list(c) for c in sorted(uniq, key=lambda c: (tkey[c[1]], key[c[0]], c[2]))]
+
+
+def stored_config(out: str | Path) -> dict:
+    """Budget and thread count of an existing comparison (``{}`` if ``out`` is none: the
+    resume then fails in :func:`prepare` with the reason)."""
+    try:
+        meta = json.loads((Path(out) / "compare.json").read_text())
+        return {"budget": meta["budget"], "threads": meta["threads"],
+                "tasks": sorted({c[1] for c in meta["cells"]}, key=list(TASKS).index),
+                "methods": sorted({c[0] for c in meta["cells"]}, key=list(METHODS).index),
+                "seeds": sorted({c[2] for c in meta["cells"]})}
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}
+
+
+def prepare(out: Path, cfg: CompareConfig, resume: bool) -> dict:
+    """Create or reopen the comparison folder; returns its ``compare.json``."""
+    from dbtool.atomic import check_writable
+    from dbtool.provenance import git_commit
+    from dbtool.runs import manifest, write_json
+
+    meta_path = out / "compare.json"
+    if resume:
+        if not out.is_dir():
+            raise CompareError(f"nothing to resume: {out} does not exist")
+        try:
+            meta = json.loads(meta_path.read_text())
+            assert meta.get("format") == FORMAT
+        except (OSError, ValueError, AssertionError):
+            raise CompareError(f"{out} is not a comparison folder (no valid compare.json)"
+                               ) from None
+        if meta["budget"] != cfg.budget or meta["threads"] != cfg.threads:
+            raise CompareError(f"{out} was run with --budget {meta['budget']} --threads "
+                               f"{meta['threads']}; a resume must use the same")
+        meta["cells"] = _order(meta["cells"] + [list(c) for c in cfg.cells()])
+    else:
+        if out.exists() and (not out.is_dir() or any(out.iterdir())):
+            raise CompareError(f"{out} already exists and is not empty; use --resume or "
+                               "another --out")
+        check_writable(out, folder=True)
+        out.mkdir(parents=True, exist_ok=True)
+        meta = {"format": FORMAT, "budget": cfg.budget, "threads": cfg.threads,
+                "arch": cfg.arch, "budget_settings": get_budget(cfg.budget).as_dict(),
+                "cells": _order([list(c) for c in cfg.cells()])}
+        write_json(out / "manifest.json", {**manifest(0, f"taichi-{cfg.arch}", meta),
+                                           "commit_at_start": git_commit()})
+    write_json(meta_path, meta)
+    return meta
+
+
+def write_results(out: Path, meta: dict) -> list[dict]:
+    """Rewrite ``results.csv`` from the cells' records; returns its rows."""
+    rows = []
+    for m, t, s in meta["cells"]:
+        rec = read_cell(out / "cells" / f"{m}-{t}-s{s}")
+        if rec is None:
+            continue
+        row = {k: rec.get(k, "") for k in COLUMNS}
+        row["metric"] = "" if rec.get("status") != "done" else repr(float(rec["metric"]))
+        row["error"] = (rec.get("error") or "").replace("\n", " ")
+        rows.append(row)
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, COLUMNS, lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    atomic_write_text(out / "results.csv", buf.getvalue())
+    return rows
+
+
+def compare(cfg: CompareConfig, out: str | Path, executor: str = "serial", workers: int = 2,
+            address: str | None = None, resume: bool = False,
+            echo: Callable[[str], object] | None = None) -> dict:
+    """Run (or finish) the comparison in ``out``; returns ``{"done", "failed", "skipped",
+    "report"}``. Cells already ``done`` are skipped."""
+    from dbtool.provenance import commit_tag
+
+    try:
+        check_executor(executor)
+    except ValueError as exc:
+        raise CompareError(str(exc)) from None
+    if executor == "ray":
+        from dbtool.compare.executors import ray_module
+
+        ray_module()  # the missing extra fails before any folder is touched
+    echo = echo or (lambda s: print(s, file=sys.stderr, flush=True))
+    out = Path(out)
+    meta = prepare(out, cfg, resume)
+    tag = commit_tag()
+    todo, skipped = [], 0
+    for m, t, s in meta["cells"]:
+        spec = CellSpec(m, t, s, meta["budget"], str(out.resolve()), meta["threads"],
+                        meta.get("arch", "cpu"), tag)
+        rec = read_cell(spec.folder)
+        if rec is not None and rec.get("status") == "done":
+            skipped += 1
+        else:
+            todo.append(spec)
+    echo(f"comparison {out}: {len(meta['cells'])} cells, {skipped} finished, {len(todo)} to "
+         f"run on {executor} (budget {meta['budget']})")
+    done = failed = 0
+    for k, rec in enumerate(execute(todo, executor, workers, address), 1):
+        ok = rec.get("status") == "done"
+        done, failed = done + ok, failed + (not ok)
+        what = (f"metric {rec['metric']:.4g}" if ok else f"FAILED: {rec.get('error')}")
+        echo(f"[{k}/{len(todo)}] {rec['method']} {rec['task']} seed {rec['seed']}: {what} "
+             f"({rec.get('wall_s', '?')} s, {rec.get('budget_used', '?')} units, "
+             f"{rec.get('worker')})")
+        write_results(out, meta)
+    rows = write_results(out, meta)
+    from dbtool.compare.report import write_report
+
+    report = write_report(out) if rows else {}
+    return {"done": done, "failed": failed, "skipped": skipped, "report": report}
