@@ -10,11 +10,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from dbtool.baselines.features import DEFAULT_BODY
 from dbtool.robotize.actuators import reference_robot
 from dbtool.sim.tasks import N_STEPS, get_task
 
 METHODS = ("diffusebot", "particle")  # what `dbtool design --method` accepts
-DEFAULT_BODY = {"gripping": "finger"}  # the reference body a task's baseline starts from
 
 
 def check_method(method: str) -> str:
@@ -90,7 +90,7 @@ def particle_run(cfg: ParticleRunConfig, out: str | Path | None = None,
 
     d = optimise(task, reference_robot(task, cfg.shape), cfg.iterations, n_steps=cfg.steps,
                  callback=log)
-    robot, actions = d.robot(), d.actions.detach().numpy()
+    robot, actions = d.robot(), d.actions
     ro = simulate(task, robot.compact(), actions, n_steps=cfg.steps)
     run.log(iteration=cfg.iterations, metric=ro.metric, final=True)
     result = Design(task.name, robot, actions, metrics={task.name: ro.metric},

@@ -1,0 +1,28 @@
+"""The gradient baselines' design representations by name (docs/method.md §7)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dbtool.baselines.cppn import CPPNRepresentation
+from dbtool.baselines.implicit import ImplicitRepresentation
+from dbtool.baselines.particle import ParticleRepresentation
+from dbtool.baselines.representation import Representation
+from dbtool.baselines.voxel import VoxelRepresentation
+from dbtool.sim.tasks import Task
+
+REPRESENTATIONS: dict[str, type[Representation]] = {
+    "particle": ParticleRepresentation,
+    "voxel": VoxelRepresentation,
+    "implicit": ImplicitRepresentation,
+    "cppn": CPPNRepresentation,
+}
+
+
+def make(name: str, task: Task, seed: int = 0, points: np.ndarray | None = None
+         ) -> Representation:
+    """The representation ``name`` of ``task``, initialised at the reference body."""
+    if name not in REPRESENTATIONS:
+        raise ValueError(f"unknown representation {name!r}; choose "
+                         f"{', '.join(REPRESENTATIONS)}")
+    return REPRESENTATIONS[name](task, seed=seed, points=points)
