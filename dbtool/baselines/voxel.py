@@ -49,14 +49,31 @@ def trilinear(points: np.ndarray, workspace, n: int = RESOLUTION
     return torch.as_tensor(np.stack(idx, 1)), torch.as_tensor(np.stack(wts, 1))
 
 
+def fit_logits(index: np.ndarray, weight: np.ndarray, target: np.ndarray, start: np.ndarray,
+               damping: float = 1e-3) -> np.ndarray:
+    """Voxel values whose interpolation at the particles is closest to ``target``:
+    ``min |W v - target|^2 + damping |v - start|^2`` (``W`` the trilinear weights), so a
+    coarse grid still reproduces a body whose edges fall between voxel centres."""
+    from scipy.sparse import csr_matrix, identity
+    from scipy.sparse.linalg import spsolve
+
+    m = len(start)
+    rows = np.repeat(np.arange(len(index)), index.shape[1])
+    w = csr_matrix((weight.ravel(), (rows, index.ravel())), shape=(len(index), m))
+    lhs = (w.T @ w + damping * identity(m)).tocsc()
+    return spsolve(lhs, w.T @ target + damping * start)
+
+
 class VoxelRepresentation(Representation):
     """Logits on a 16^3 voxel grid; each particle reads the trilinear blend of its 8 voxels."""
 
     name = "voxel"
     design_lr = 0.01
-    init_text = ("The task's reference body sampled at the voxel centres: occupancy logit +2 "
-                 "inside and -2 outside, softness 0, actuator logits 4 on the reference group "
-                 "of the design particle nearest to the voxel centre.")
+    init_text = ("The task's reference body: occupancy logits fitted by damped least squares so "
+                 "that the interpolated logit at the particles is +2 inside and -2 outside "
+                 "(voxels no particle reads keep the value at their centre), softness 0, "
+                 "actuator logits 4 on the reference group of the design particle nearest to "
+                 "the voxel centre.")
 
     def __init__(self, task: Task, seed: int = 0, points: np.ndarray | None = None) -> None:
         super().__init__(task, seed, points)
@@ -68,12 +85,15 @@ class VoxelRepresentation(Representation):
             _, ref = reference_fields(task, self.points)
             acts = ref[cKDTree(self.points).query(centres)[1]]
         grid = (n, n, n)
-        self.occupancy = torch.tensor(INIT_LOGIT * (2.0 * occ - 1.0)).reshape(grid)
+        self.index, self.weight = trilinear(self.points, self.workspace, n)
+        ref_occ, _ = reference_fields(task, self.points)
+        logits = fit_logits(self.index.numpy(), self.weight.numpy(),
+                            INIT_LOGIT * (2.0 * ref_occ - 1.0), INIT_LOGIT * (2.0 * occ - 1.0))
+        self.occupancy = torch.tensor(logits).reshape(grid)
         self.softness = torch.zeros(grid, dtype=torch.float64)
         self.actuators = torch.tensor(ACTUATOR_LOGIT * acts).reshape(grid + (g,))
         for p in self.parameters():
             p.requires_grad_(True)
-        self.index, self.weight = trilinear(self.points, self.workspace, n)
 
     def parameters(self) -> list[torch.Tensor]:
         return [self.occupancy, self.softness, self.actuators]
