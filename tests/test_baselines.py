@@ -187,3 +187,25 @@ def test_voxel_baseline_takes_a_simulator_step(monkeypatch):
                  - representation.surrogate(start, seen[0], task))
     assert float(predicted) > 0
     assert np.array_equal(out.robot().active(), reference_robot(task, "box").active())
+
+
+def test_a_failing_episode_restores_the_last_good_design():
+    task = get_task("crawling")
+    rep = make("voxel", task, points=_points(task))
+    seen = []
+
+    def objective(robot, actions):
+        if len(seen) == 3:
+            raise ValueError("the body is empty")
+        seen.append((robot.occupancy.copy(), actions.copy()))
+        n = robot.n
+        return float(robot.occupancy.sum()), {
+            "occupancy": np.ones(n), "stiffness": np.zeros(n),
+            "actuators": np.ones((n, task.n_groups)), "actions": np.ones_like(actions)}
+
+    res = representation.optimise(rep, 10, n_steps=3, objective=objective)
+    assert [h.get("error") for h in res.history] == [None, None, None, "the body is empty"]
+    occ, actions = seen[-1]
+    assert np.array_equal(res.robot().occupancy, occ)
+    assert np.array_equal(res.actions, actions)
+    assert not np.array_equal(seen[0][0], occ)  # the steps did move the design

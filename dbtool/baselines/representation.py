@@ -111,8 +111,9 @@ def optimise(rep: Representation, iterations: int, n_steps: int = N_STEPS,
 
     ``objective(robot, actions) -> (value, grads)`` replaces the simulator (tests use a toy
     one); ``grads`` holds d value / d ``occupancy``, ``stiffness``, ``actuators``, ``actions``.
-    ``callback(k, value, result)`` is called after each step. Failing episodes (an empty body,
-    a blown-up simulation) end the loop early and keep the last good parameters.
+    ``callback(k, value, result)`` is called after each step. A failing episode (an empty body,
+    a blown-up simulation) ends the loop and restores the parameters and controller of the
+    last episode that ran.
     """
     from dbtool.robotize import RobotizeError
     from dbtool.sim.simulator import SimulationError
@@ -128,12 +129,20 @@ def optimise(rep: Representation, iterations: int, n_steps: int = N_STEPS,
     out = Optimised(rep, actions.copy())
     if objective is None:
         objective = _simulator_objective(task, n_steps)
+    good = [p.detach().clone() for p in rep.parameters()]
+    good_u = actions.copy()
     for k in range(iterations):
         try:
             value, grads = objective(rep.robot(), u.detach().numpy())
         except (ValueError, RobotizeError, SimulationError, FloatingPointError) as exc:
+            with torch.no_grad():  # back to the parameters of the last good episode
+                for p, g in zip(rep.parameters(), good, strict=True):
+                    p.copy_(g)
+            out.actions = good_u
             out.history.append({"iteration": k, "error": str(exc)[:200]})
             break
+        good = [p.detach().clone() for p in rep.parameters()]
+        good_u = u.detach().numpy().copy()
         opt.zero_grad()
         loss = -surrogate(rep.fields(), grads, task)
         if task.n_groups:

@@ -3,7 +3,8 @@ cell's budget and handing back its final design: a robot and its open-loop contr
 
 - ``particle``, ``voxel``, ``implicit``, ``cppn``: the gradient baselines
   (:mod:`dbtool.baselines`), ``gradient_iterations(units)`` gradient episodes of the shared loop;
-- ``prior``: plain samples of the shipped prior from the null embedding, no embedding
+- ``prior``: plain samples of the shipped prior from DiffuseBot's starting embedding (the
+  uniform mixture over the null condition and the family captions), no embedding
   optimisation and no co-design; ``units - 1`` samples, each robotized and scored with the
   task's prescribed controller, the best kept;
 - ``diffusebot``: embedding optimisation then diffusion as co-design, sized to the budget by
