@@ -133,6 +133,10 @@ def diffusebot_plan(task: str, budget: Budget) -> dict:
     steps = max(1, int((free // 2 - 1) // GRAD_COST))
     cd = GRAD_COST * steps + 1
     emb_units = int(free - cd)
+    if emb_units < 2:
+        raise ValueError(f"a budget of {budget.units} units is too small for DiffuseBot: it "
+                         f"needs {int(cd) + 3} (two embedding epochs, one Langevin step, the "
+                         "final evaluation)")
     epochs = int(np.clip(emb_units // 60, 2, 20))
     per_epoch = max(1, emb_units // epochs)
     return {"preset": "quick", "epochs": epochs, "samples_per_epoch": per_epoch,
