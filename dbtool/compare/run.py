@@ -159,9 +159,10 @@ def compare(cfg: CompareConfig, out: str | Path, executor: str = "serial", worke
     except ValueError as exc:
         raise CompareError(str(exc)) from None
     if executor == "ray":
-        from dbtool.compare.executors import ray_module
+        from dbtool.compare.executors import check_address, ray_module
 
         ray_module()  # the missing extra fails before any folder is touched
+        check_address(address)  # and so does an unreachable cluster
     echo = echo or (lambda s: print(s, file=sys.stderr, flush=True))
     out = Path(out)
     meta = prepare(out, cfg, resume)
