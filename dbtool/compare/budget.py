@@ -32,7 +32,7 @@ class Budget:
 
 
 BUDGETS = {
-    "smoke": Budget("smoke", 6, n_steps=8, sample_steps=8,
+    "smoke": Budget("smoke", 8, n_steps=8, sample_steps=8,
                     text="tests and CI: 8-step episodes, each cell under a minute"),
     "quick": Budget("quick", 20, text="full 100-step episodes; the table of docs/results.md "
                     "in about two hours on a 2-core CPU"),
