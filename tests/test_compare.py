@@ -1,0 +1,272 @@
+"""``dbtool compare`` run as a user would (docs/results.md): the smoke budget on two tasks with
+every executor, a resume after a kill, bad input, and the budget arithmetic of every method.
+
+The CLI runs in subprocesses: a comparison sets Taichi and torch to one thread, which must not
+leak into the pytest process.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from dbtool.compare.budget import BUDGETS, GRAD_COST, get_budget, gradient_iterations, used
+from dbtool.compare.methods import GRADIENT, METHODS, TITLES, diffusebot_configs, diffusebot_plan
+from dbtool.design import Design
+from dbtool.sim.tasks import TASKS
+
+CLI = [sys.executable, "-c", "from dbtool.cli import app; app()", "compare"]
+NO_RAY = [sys.executable, "-c", "import sys; sys.modules['ray'] = None; "
+          "from dbtool.cli import app; app()", "compare"]
+SMOKE = ["--budget", "smoke", "--seeds", "0"]
+TWO_TASKS = ["--tasks", "crawling", "--tasks", "gripping", "--methods", "all"]
+# what must not depend on where a cell ran (wall_s, worker and commit may)
+SAME = ("method", "task", "seed", "status", "metric", "budget_units", "budget_used",
+        "forward_episodes", "gradient_episodes", "error")
+CELL_FILES = ("design.npz", "metrics.jsonl", "montage.png", "cell.json")
+ENV = {**os.environ, "MPLBACKEND": "Agg", "TI_LOG_LEVEL": "warn", "PYTHONUNBUFFERED": "1"}
+
+
+def _compare(*args: str, cwd: Path | None = None, cmd: list[str] = CLI,
+             timeout: float = 900) -> subprocess.CompletedProcess:
+    return subprocess.run([*cmd, *args], capture_output=True, text=True, cwd=cwd, env=ENV,
+                          timeout=timeout)
+
+
+def _rows(folder: Path) -> list[dict]:
+    with open(folder / "results.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _same(rows: list[dict]) -> dict[tuple, tuple]:
+    return {(r["method"], r["task"], r["seed"]): tuple(r[c] for c in SAME) for r in rows}
+
+
+def _cell(folder: Path, method: str, task: str, seed: int = 0) -> Path:
+    return folder / "cells" / f"{method}-{task}-s{seed}"
+
+
+def _tree(root: Path) -> dict[str, tuple[int, bytes]]:
+    """Every file and folder under ``root`` with its mtime and content."""
+    return {str(p.relative_to(root)): (p.stat().st_mtime_ns,
+                                       p.read_bytes() if p.is_file() else b"")
+            for p in sorted(root.rglob("*"))}
+
+
+@pytest.fixture(scope="module")
+def serial_run(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess]:
+    """The uninterrupted serial smoke comparison of crawling and gripping, all six methods."""
+    out = tmp_path_factory.mktemp("compare") / "serial"
+    res = _compare(*SMOKE, *TWO_TASKS, "--executor", "serial", "--out", str(out))
+    assert res.returncode == 0, res.stderr[-3000:]
+    return out, res
+
+
+def test_serial_smoke_comparison(serial_run):
+    out, res = serial_run
+    rows = _rows(out)
+    assert [(r["task"], r["method"]) for r in rows] == [
+        (t, m) for t in ("crawling", "gripping") for m in METHODS]
+    assert {r["status"] for r in rows} == {"done"} and {r["error"] for r in rows} == {""}
+    assert "12 cells done, 0 failed, 0 already finished" in res.stdout
+    units = get_budget("smoke").units
+    for r in rows:
+        assert float(r["budget_units"]) == units == 8
+        assert float(r["budget_used"]) <= units
+        fwd, grad = int(r["forward_episodes"]), int(r["gradient_episodes"])
+        assert float(r["budget_used"]) == used(fwd, grad)
+        if r["method"] in GRADIENT:  # one gradient episode and the final evaluation
+            assert (fwd, grad) == (2, gradient_iterations(units)) == (2, 1)
+        elif r["method"] == "prior":  # units - 1 samples and the final evaluation
+            assert (fwd, grad) == (units, 0)
+        else:  # two epochs of one design, one Langevin step, its score, the final evaluation
+            assert (fwd, grad) == (5, 1)
+            assert float(r["budget_used"]) == diffusebot_plan(r["task"],
+                                                              get_budget("smoke"))["planned_units"]
+        cell = _cell(out, r["method"], r["task"])
+        for name in CELL_FILES:
+            assert (cell / name).stat().st_size > 0, cell / name
+        rec = json.loads((cell / "cell.json").read_text())
+        assert rec["status"] == "done" and repr(float(rec["metric"])) == r["metric"]
+        assert Design.load(cell / "design.npz").metrics == {r["task"]: float(r["metric"])}
+        last = json.loads((cell / "metrics.jsonl").read_text().splitlines()[-1])
+        assert last == {"phase": "final", "metric": float(r["metric"])}
+    for name in ("table.md", "bars.png", "robots.png"):
+        assert (out / name).stat().st_size > 0
+        assert f"{out / name}" in res.stdout
+    table = (out / "table.md").read_text().splitlines()
+    assert table[0] == "| method | Crawling | Gripping | mean rank |"
+    assert [line.split(" | ")[0] for line in table[2:8]] == [f"| {TITLES[m]}" for m in METHODS]
+    assert "1 seed per cell, budget 8 forward-episode units per cell." in table[-1]
+
+
+def test_ray_executor_gives_the_serial_numbers(serial_run, tmp_path):
+    out = tmp_path / "ray"
+    res = _compare(*SMOKE, *TWO_TASKS, "--executor", "ray", "--workers", "2", "--out", str(out))
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "12 cells, 0 finished, 12 to run on ray" in res.stdout
+    rows = _rows(out)
+    assert len(rows) == 12 and {r["status"] for r in rows} == {"done"}
+    assert _same(rows) == _same(_rows(serial_run[0]))
+    for name in ("table.md", "bars.png", "robots.png"):
+        assert (out / name).stat().st_size > 0
+    for r in rows:
+        for name in CELL_FILES:
+            assert (_cell(out, r["method"], r["task"]) / name).stat().st_size > 0
+
+
+def test_local_executor_gives_the_serial_numbers(serial_run, tmp_path):
+    out = tmp_path / "local"
+    res = _compare(*SMOKE, "--tasks", "crawling", "--methods", "particle", "--methods", "prior",
+                   "--executor", "local", "--workers", "2", "--out", str(out))
+    assert res.returncode == 0, res.stderr[-3000:]
+    rows = _rows(out)
+    serial = _same(_rows(serial_run[0]))
+    assert _same(rows) == {k: serial[k] for k in (("particle", "crawling", "0"),
+                                                  ("prior", "crawling", "0"))}
+    assert "2 cells done, 0 failed, 0 already finished" in res.stdout
+
+
+def test_resume_after_a_kill_skips_the_finished_cell(serial_run, tmp_path):
+    out = tmp_path / "killed"
+    methods = ("particle", "prior", "diffusebot")
+    args = [*SMOKE, "--tasks", "crawling", *(a for m in methods for a in ("--methods", m)),
+            "--executor", "serial", "--out", str(out)]
+    first = _cell(out, "particle", "crawling") / "cell.json"
+    proc = subprocess.Popen([*CLI, *args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env=ENV)
+    try:
+        deadline = time.monotonic() + 600
+        while not first.exists() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+    finally:
+        proc.kill()  # SIGKILL: no cleanup of any kind
+        proc.wait(timeout=60)
+    assert proc.returncode == -signal.SIGKILL
+    assert [m for m in methods if (_cell(out, m, "crawling") / "cell.json").exists()] == [
+        "particle"]
+    before = first.stat().st_mtime_ns, first.read_bytes()
+    wall = json.loads(before[1])["wall_s"]
+
+    res = _compare("--resume", "--out", str(out), "--executor", "serial")
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "3 cells, 1 finished, 2 to run on serial (budget smoke)" in res.stdout
+    assert "2 cells done, 0 failed, 1 already finished" in res.stdout
+    assert (first.stat().st_mtime_ns, first.read_bytes()) == before
+    rows = _rows(out)
+    assert [r["method"] for r in rows] == list(methods)
+    assert rows[0]["wall_s"] == str(wall)
+    serial = _same(_rows(serial_run[0]))
+    assert _same(rows) == {(m, "crawling", "0"): serial[(m, "crawling", "0")] for m in methods}
+    for m in methods:  # the rerun cells have one run's progress rows, not two
+        log = (_cell(out, m, "crawling") / "metrics.jsonl").read_text()
+        assert log == (_cell(serial_run[0], m, "crawling") / "metrics.jsonl").read_text()
+
+
+def _fake_comparison(folder: Path) -> None:
+    folder.mkdir()
+    (folder / "compare.json").write_text(json.dumps(
+        {"format": "dbtool.compare/1", "budget": "smoke", "threads": 1, "arch": "cpu",
+         "cells": [["particle", "crawling", 0]]}))
+
+
+def _with_file(folder: Path) -> None:
+    folder.mkdir()
+    (folder / "notes.txt").write_text("not a comparison\n")
+
+
+ONE = ["--budget", "smoke", "--tasks", "crawling", "--methods", "particle"]
+BAD = {
+    "unknown method": (["--budget", "smoke", "--methods", "nosuch", "--out", "new"], None,
+                       "unknown method 'nosuch'; choose from particle, voxel, implicit, cppn, "
+                       "prior, diffusebot or all"),
+    "unknown task": (["--budget", "smoke", "--tasks", "walking", "--out", "new"], None,
+                     "unknown task 'walking'"),
+    "unknown budget": (["--budget", "huge", "--out", "new"], None,
+                       "unknown budget 'huge'; choose one of smoke, quick, paper"),
+    "unknown executor": ([*ONE, "--executor", "nope", "--out", "new"], None,
+                         "unknown executor 'nope'; choose one of serial, local, ray"),
+    "resume without out": ([*ONE, "--resume"], None, "--resume needs --out"),
+    "resume a missing folder": ([*ONE, "--resume", "--out", "new"], None,
+                                "nothing to resume"),
+    "resume a folder that is no comparison": ([*ONE, "--resume", "--out", "other"], _with_file,
+                                              "is not a comparison folder"),
+    "resume on another budget": (["--budget", "quick", "--resume", "--out", "other"],
+                                 _fake_comparison, "was run with --budget smoke --threads 1"),
+    "new comparison in a non-empty folder": ([*ONE, "--out", "other"], _with_file,
+                                             "already exists and is not empty"),
+    "unreachable ray": ([*ONE, "--executor", "ray", "--address", "127.0.0.1:1", "--out", "new"],
+                        None, "cannot reach the Ray cluster at 127.0.0.1:1"),
+    "ray not installed": ([*ONE, "--executor", "ray", "--out", "new"], None,
+                          "pip install 'dbtool[cluster]'"),
+}
+
+
+@pytest.mark.parametrize("case", BAD)
+def test_bad_input_is_one_error_line_and_touches_nothing(case, tmp_path):
+    args, setup, message = BAD[case]
+    if setup:
+        setup(tmp_path / "other")
+    before = _tree(tmp_path)
+    start = time.monotonic()
+    res = _compare(*args, cwd=tmp_path, cmd=NO_RAY if case == "ray not installed" else CLI,
+                   timeout=120)
+    assert time.monotonic() - start < 60
+    assert res.returncode == 2, (res.stdout, res.stderr)
+    errors = [line for line in res.stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and message in errors[0], res.stderr
+    assert "Traceback" not in res.stderr and "comparison" not in res.stdout
+    assert _tree(tmp_path) == before
+
+
+def test_space_separated_lists_are_refused(tmp_path):
+    """typer options take one value per flag: ``--tasks a --tasks b``, not ``--tasks a b``."""
+    res = _compare("--tasks", "crawling", "gripping", "--out", "new", cwd=tmp_path, timeout=120)
+    assert res.returncode == 2 and "unexpected extra argument" in res.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------------------- budget arithmetic
+PLANS = {  # (epochs, samples per epoch, co-design samples, Langevin steps, planned units)
+    "smoke": {t: (2, 1, 1, 1, 8) for t in TASKS},
+    "quick": {t: (2, 5, 1, 2, 20) for t in TASKS},
+    "paper": {"balancing": (20, 60, 4, 27, 1637), "landing": (20, 60, 4, 21, 1541),
+              **{t: (20, 60, 4, 45, 1925) for t in ("crawling", "hurdling", "gripping", "box")}},
+}
+
+
+@pytest.mark.parametrize("name", BUDGETS)
+def test_every_method_fits_the_budget(name):
+    from dbtool.codesign.config import n_steps
+
+    budget = get_budget(name)
+    assert used(3, 2) == 3 + 2 * (GRAD_COST - 1) == 9.0
+    n = gradient_iterations(budget.units)
+    assert n == {"smoke": 1, "quick": 4, "paper": 499}[name]
+    assert used(n + 1, n) <= budget.units < used(n + 2, n + 1)  # all that fits, and no more
+    for task in TASKS:
+        plan = diffusebot_plan(task, budget)
+        sizes = (plan["epochs"], plan["samples_per_epoch"], plan["codesign_samples"],
+                 plan["langevin_steps"], plan["planned_units"])
+        assert sizes == PLANS[name][task]
+        assert plan["preset"] == ("paper" if name == "paper" else "quick")
+        assert plan["planned_units"] <= budget.units
+        assert plan["planned_units"] == (
+            plan["epochs"] * plan["samples_per_epoch"] + 1
+            + plan["codesign_samples"] * used(plan["langevin_steps"] + 1,
+                                              plan["langevin_steps"]))
+        emb, cod, _ = diffusebot_configs(task, budget)
+        assert (emb.epochs, emb.samples_per_epoch, cod.samples, n_steps(cod)) == sizes[:4]
+        assert emb.sample_steps == budget.sample_steps
+
+
+def test_gradient_iterations_of_tiny_budgets():
+    assert [gradient_iterations(u) for u in (0, 1, 4, 5, 8, 9)] == [0, 0, 0, 1, 1, 2]
