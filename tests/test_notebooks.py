@@ -43,6 +43,11 @@ QUICK_SETTINGS = {
     "fig16_sim_vs_real": [("TENDONS", ("flexion",), ("flexion", "extension")),
                           ("FIT", ("gain", "friction_mm"),
                            ("gain", "stiffness_scale", "friction_mm")), ("MAX_EVALS", 4, 20)],
+    "fig12_baselines": [("TASKS", ("crawling",), ("crawling", "gripping", "hurdling")),
+                        ("BUDGET", "smoke", "smoke")],
+    "table_main": [("TASKS", ("crawling", "gripping"),
+                    ("balancing", "landing", "crawling", "hurdling", "gripping", "box")),
+                   ("SEEDS", (0,), (0, 1)), ("BUDGET", "smoke", "smoke")],
 }
 
 
