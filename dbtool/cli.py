@@ -222,7 +222,13 @@ def generate(
     typer.echo(f"grid: {out / 'grid.png'}")
 
 
-def main() -> None:  # pragma: no cover
+def main() -> None:
+    """The ``dbtool`` console command; ``compare`` also takes space-separated lists."""
+    import sys
+
+    from dbtool.cli_compare import expand_list_options
+
+    sys.argv[1:] = expand_list_options(sys.argv[1:])
     app()
 
 

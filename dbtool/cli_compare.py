@@ -9,6 +9,26 @@ import typer
 
 from dbtool.cli_common import guarded
 
+LIST_OPTIONS = ("--tasks", "--methods", "--seeds")
+
+
+def expand_list_options(argv: list[str]) -> list[str]:
+    """``compare --tasks a b --seeds 0 1`` as typer reads it: ``--tasks a --tasks b ...``
+    (an option of typer takes one value per flag)."""
+    if not argv or argv[0] != "compare":
+        return list(argv)
+    out: list[str] = []
+    owner = None
+    for tok in argv:
+        if tok.startswith("-"):
+            owner = tok if tok in LIST_OPTIONS else None
+            out.append(tok)
+            continue
+        if owner is not None and out[-1] != owner:
+            out.append(owner)  # a further value of the list option before it
+        out.append(tok)
+    return out
+
 
 def compare_command(
     tasks: list[str] = typer.Option(None, "--tasks", help="tasks (default: all six)"),

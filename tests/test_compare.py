@@ -18,16 +18,17 @@ from pathlib import Path
 
 import pytest
 
+from dbtool.cli_compare import expand_list_options
 from dbtool.compare.budget import BUDGETS, GRAD_COST, get_budget, gradient_iterations, used
 from dbtool.compare.methods import GRADIENT, METHODS, TITLES, diffusebot_configs, diffusebot_plan
 from dbtool.design import Design
 from dbtool.sim.tasks import TASKS
 
-CLI = [sys.executable, "-c", "from dbtool.cli import app; app()", "compare"]
+CLI = [sys.executable, "-c", "from dbtool.cli import main; main()", "compare"]
 NO_RAY = [sys.executable, "-c", "import sys; sys.modules['ray'] = None; "
-          "from dbtool.cli import app; app()", "compare"]
+          "from dbtool.cli import main; main()", "compare"]
 SMOKE = ["--budget", "smoke", "--seeds", "0"]
-TWO_TASKS = ["--tasks", "crawling", "--tasks", "gripping", "--methods", "all"]
+TWO_TASKS = ["--tasks", "crawling", "gripping", "--methods", "all"]  # as a user types it
 # what must not depend on where a cell ran (wall_s, worker and commit may)
 SAME = ("method", "task", "seed", "status", "metric", "budget_units", "budget_used",
         "forward_episodes", "gradient_episodes", "error")
@@ -227,11 +228,18 @@ def test_bad_input_is_one_error_line_and_touches_nothing(case, tmp_path):
     assert _tree(tmp_path) == before
 
 
-def test_space_separated_lists_are_refused(tmp_path):
-    """typer options take one value per flag: ``--tasks a --tasks b``, not ``--tasks a b``."""
-    res = _compare("--tasks", "crawling", "gripping", "--out", "new", cwd=tmp_path, timeout=120)
-    assert res.returncode == 2 and "unexpected extra argument" in res.stderr
+def test_space_separated_lists_reach_every_value(tmp_path):
+    """``--tasks a b`` works like ``--tasks a --tasks b``: the second value is read (and here
+    refused by name), not dropped or taken for an argument."""
+    res = _compare("--tasks", "crawling", "nosuchtask", "--seeds", "0", "1", "--out", "new",
+                   cwd=tmp_path, timeout=120)
+    assert res.returncode == 2 and "unknown task 'nosuchtask'" in res.stderr, res.stderr
     assert list(tmp_path.iterdir()) == []
+    assert expand_list_options(["compare", "--methods", "prior", "diffusebot", "--seeds", "0",
+                                "1", "--budget", "smoke", "--out", "d"]) == [
+        "compare", "--methods", "prior", "--methods", "diffusebot", "--seeds", "0", "--seeds",
+        "1", "--budget", "smoke", "--out", "d"]
+    assert expand_list_options(["design", "gripping"]) == ["design", "gripping"]
 
 
 # ------------------------------------------------------------------------- budget arithmetic
