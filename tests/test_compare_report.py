@@ -119,7 +119,7 @@ def test_table_markdown(folder):
     assert lines[2] == "| particle | 3e-05 ± 1.41e-05 (2) | 0.188 ± 0.0884 (2) | 3 |"
     assert lines[3] == "| voxel | 0.002 ± 0.00141 (2) | – (2 failed) | 2 |"
     assert lines[4] == "| implicit fn | – | **0.5** ± 0.354 (2) | 1 |"
-    assert lines[5] == "| DiffuseBot | **0.125** ± 0 (1, 1 failed) | **0.5** ± 0 (2) | 1 |"
+    assert lines[5] == "| DiffuseBot | **0.125** (1, 1 failed) | **0.5** ± 0 (2) | 1 |"
     assert text.count("**") == 6  # three bold means: both tied crawling cells, one balancing
     assert "2 seeds per cell, budget 40 forward-episode units per cell." in lines[-1]
 

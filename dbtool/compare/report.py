@@ -161,14 +161,16 @@ def _g(x: float) -> str:
 
 
 def format_cell(cell: dict) -> str:
-    """``mean ± sd (n)``, the mean in bold for rank 1; ``–`` with no done seed; failures
-    counted as ``(n, k failed)`` or ``– (k failed)``."""
+    """``mean ± sd (n)`` (``mean (1)`` for one seed), the mean in bold for rank 1; ``–``
+    with no done seed; failures counted as ``(n, k failed)`` or ``– (k failed)``."""
     if not cell["n"]:
         return DASH + (f" ({cell['failed']} failed)" if cell["failed"] else "")
     mean = _g(cell["mean"])
     if cell["rank"] == 1:
         mean = f"**{mean}**"
     count = f"{cell['n']}, {cell['failed']} failed" if cell["failed"] else f"{cell['n']}"
+    if cell["n"] == 1:  # one seed: no spread to show
+        return f"{mean} ({count})"
     return f"{mean} ± {_g(cell['sd'])} ({count})"
 
 
