@@ -4,9 +4,10 @@ cell, counted in forward-episode units.
 One unit is one forward episode of the task (``n_steps`` control steps). A gradient episode
 (the forward pass with checkpoints, then the backward pass) counts ``GRAD_COST`` units: the
 ratio measured on the reference bodies of the six tasks at one thread, 3.86-4.13, mean 3.94
-(``benchmarks/compare.py``, ``benchmarks/results/compare.json``). What a cell used is counted, not planned: every simulator episode
-increments :data:`dbtool.sim.simulator.EPISODES`, and a cell reports
-``forward + (GRAD_COST - 1) * backward``. The diffusion model's own cost (sampling, the
+(``benchmarks/compare.py``, ``benchmarks/results/compare.json``). What a cell used is
+counted, not planned: every simulator episode increments
+:data:`dbtool.sim.simulator.EPISODES`, and a cell reports ``forward + (GRAD_COST - 1) *
+backward``. The diffusion model's own cost (sampling, the
 robotizer) is not in the budget; its wall time is in ``results.csv``.
 """
 
