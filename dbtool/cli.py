@@ -8,6 +8,7 @@ import typer
 
 from dbtool.cli_common import ProgressBar, guarded
 from dbtool.cli_compare import compare_command
+from dbtool.cli_export import export_command
 from dbtool.cli_prior import prior_app
 from dbtool.cli_realgap import realgap_app
 from dbtool.codesign.config import PROMPT_T_MIN
@@ -19,6 +20,7 @@ TASK_NAMES = "balancing, landing, crawling, hurdling, gripping, box"
 app.add_typer(prior_app, name="prior")
 app.add_typer(realgap_app, name="realgap")
 app.command("compare")(compare_command)
+app.command("export")(export_command)
 
 
 @app.command()
@@ -121,48 +123,6 @@ def design(
     typer.echo(f"{run.task.name}: final metric = {metric:.6f} "
                f"(from {result.meta.get('source', 'co-design')})")
     typer.echo(f"design:  {run.path / 'design.npz'}")
-
-
-@app.command()
-def export(
-    run_dir: Path = typer.Argument(None, help="run directory (default: the newest under runs/)"),
-    design: Path = typer.Option(None, help="a design file (.npz) instead of a run directory"),
-    stl: bool = typer.Option(False, "--stl", help="write binary STL meshes"),
-    threemf: bool = typer.Option(False, "--3mf", help="write assembly.3mf (one object per part)"),
-    channels: bool = typer.Option(False, "--channels", help="cut the tendon channels"),
-    channel_diameter: float = typer.Option(1.5, min=0.1, help="tendon channel diameter (mm)"),
-    min_wall: float = typer.Option(1.0, min=0.0, help="material kept around a channel (mm)"),
-    infill: str = typer.Option("none", help="none | voronoi (2.5 mm cells, 0.4 mm beams)"),
-    shell: float = typer.Option(1.2, min=0.1, help="solid skin around the infill (mm)"),
-    scale_mm: float = typer.Option(1000.0, "--scale-mm", min=1e-3,
-                                   help="mm per simulation unit (the finger: 60 x 72.5 x 42.5 mm)"),
-    out: Path = typer.Option(Path("exports"), help="parent folder; writes OUT/<design-name>/"),
-) -> None:
-    """Export a design for fabrication (docs/method.md §8): watertight meshes in mm, the
-    mirrored gripper on its base with tendon routing, a report. With neither --stl nor --3mf,
-    writes both."""
-    from dbtool.design import Design
-    from dbtool.export.assembly import ExportConfig, export_design
-    from dbtool.runs import design_name, find_design
-
-    with guarded():
-        path = find_design(run_dir, design)
-        cfg = ExportConfig(scale_mm=scale_mm, stl=stl or not threemf, threemf=threemf or not stl,
-                           channels=channels, channel_diameter=channel_diameter,
-                           min_wall=min_wall, infill=infill, shell=shell)
-        name = design_name(path)
-        d = Design.load(path)
-        rep = export_design(d, out / name, cfg)
-    for f in rep["files"] + ["report.json", "report.md"] + (
-            ["tendons.json", "tendons.png"] if "tendons" in rep else []):
-        typer.echo(f"wrote {out / name / f}")
-    main = rep["parts"]["assembly" if "assembly" in rep["parts"] else "body"]
-    typer.echo(f"{d.task}: watertight={main['watertight']} bodies={main['bodies']} "
-               f"volume={main['volume_mm3']:.0f} mm^3 bbox={main['bbox_mm']} mm")
-    if "tendons" in rep:
-        t = rep["tendons"]
-        typer.echo(f"tendons: {t['count']} x {t['points_per_tendon']} routing points, thinnest "
-                   f"wall around a channel {t['channel_clearance_mm']:.2f} mm")
 
 
 @app.command()

@@ -40,7 +40,7 @@ def _inside_with_clearance(solid, point, clearance: float) -> bool:
 @pytest.fixture(scope="module")
 def gripper(tmp_path_factory):
     out = tmp_path_factory.mktemp("export") / "finger"
-    rep = export_design(_finger(), out, ExportConfig(channels=True))
+    rep = export_design(_finger(), out, ExportConfig(channels=True, slice=False))
     return out, rep
 
 
@@ -50,8 +50,11 @@ def test_gripper_parts_are_single_watertight_volumes(gripper):
         p = rep["parts"][name]
         assert p["watertight"] and p["is_volume"], name
         assert p["manifold_status"] == "NoError" and p["bodies"] == 1, name
-    assert np.allclose(rep["parts"]["assembly"]["bbox_mm"], [60.0, 80.0, 120.0], atol=0.1)
-    assert rep["parts"]["base"]["genus"] == 4 + 4  # mounting holes + tendon exits
+    # the smoothed fingertip may reach a little below the lattice (flat faces keep the volume)
+    box = rep["parts"]["assembly"]["bbox_mm"]
+    assert np.allclose(box[::2], [60.0, 120.0], atol=0.1) and 80.0 <= box[1] <= 80.5
+    assert rep["parts"]["base"]["genus"] == 4 + 4  # mounting holes + tendon bores
+    assert rep["parts"]["finger"]["genus"] == 2  # each channel runs root face to fingertip
     v = rep["volume_check"]
     assert v["part"] == "finger" and abs(v["ratio"] - 1) < 0.1
     assert {"finger.stl", "finger_mirror.stl", "base.stl", "assembly.stl",
@@ -76,10 +79,17 @@ def test_stl_and_3mf_round_trip_the_volumes(gripper):
     assert np.allclose(vols, want, rtol=1e-4)
 
 
+def _gripper_frame(out: Path, rep: dict, name: str) -> np.ndarray:
+    """A part's STL vertices turned back from its print pose into the gripper's frame."""
+    mesh = trimesh.load(out / f"{name}.stl")
+    mesh.apply_transform(np.linalg.inv(np.array(rep["parts"][name]["print_pose"]["matrix"])))
+    return mesh.vertices
+
+
 def test_mirror_finger_is_the_exact_reflection(gripper):
-    out, _ = gripper
-    a = trimesh.load(out / "finger.stl").vertices
-    b = trimesh.load(out / "finger_mirror.stl").vertices.copy()
+    out, rep = gripper
+    a = _gripper_frame(out, rep, "finger")
+    b = _gripper_frame(out, rep, "finger_mirror").copy()
     b[:, 2] = FULL[2] * 1000.0 - b[:, 2]  # reflect back about the mirror plane z = 60 mm
     hausdorff = max(cKDTree(a).query(b)[0].max(), cKDTree(b).query(a)[0].max())
     assert hausdorff < 1e-3
@@ -94,7 +104,7 @@ def test_tendons_have_four_routing_points_inside_with_clearance(gripper):
     assert {(t["finger"], t["role"]) for t in tendons} == {
         (f, r) for f in ("finger", "finger_mirror") for r in ("flexion", "extension")}
     d = _finger()
-    solid = build(d, ExportConfig()).parts  # the fingers without channels
+    solid = build(d, ExportConfig(channels=False)).parts  # the fingers without channels
     need = tj["channel_diameter_mm"] / 2 + tj["min_wall_mm"]
     for t in tendons:
         pts = np.array(t["points"])
@@ -110,28 +120,30 @@ def test_tendons_have_four_routing_points_inside_with_clearance(gripper):
         if t["role"] == "flexion":
             assert np.all(toward < np.abs(np.array(other["points"])[:, 2] - plane))
     assert (out / "tendons.png").stat().st_size > 10_000
-    assert rep["tendons"]["all_points_clear"]
-    assert rep["tendons"]["channel_clearance_mm"] >= tj["min_wall_mm"] - 0.26
+    assert rep["tendons"]["all_ok"]
+    assert rep["tendons"]["channel_clearance_mm"] >= tj["min_wall_mm"]
 
 
 def test_channels_keep_one_body_and_the_wall_around_them(gripper):
     _, rep = gripper
-    plain = build(_finger(), ExportConfig())
+    plain = build(_finger(), ExportConfig(channels=False))
     f = rep["parts"]["finger"]
     assert f["bodies"] == 1 and f["watertight"]
     assert f["volume_mm3"] < plain.parts["finger"].volume()  # material was cut
-    # the ray-cast wall check sees the channel walls: at least min_wall (- 0.1 for the
-    # polygonal tube), and far thinner than the solid finger's thinnest wall
+    # the ray-cast wall check sees the walls around the channels, knot pockets and pin
+    # pockets: at least min_wall (- 0.1 for the polygonal tubes); the finger without channels
+    # (pin pockets only) is thicker
     plain_walls = wall_thickness(plain.parts["finger"])
     assert np.isinf(plain_walls).mean() > 0.5
-    assert 0.9 <= f["min_wall_mm"] <= 2.0 < np.min(plain_walls)
+    assert 0.9 <= f["min_wall_mm"] <= 2.0
+    assert f["min_wall_mm"] <= np.min(plain_walls) + 1e-3
 
 
 @pytest.mark.parametrize("task", sorted(set(TASKS) - {"gripping"}))
 def test_body_and_actuator_regions_of_every_task(task, tmp_path):
     t = get_task(task)
     d = Design(task, reference_robot(t, "star"), t.controller())
-    rep = export_design(d, tmp_path / task, ExportConfig(threemf=True))
+    rep = export_design(d, tmp_path / task, ExportConfig(threemf=True, slice=False))
     parts = rep["parts"]
     for name, p in parts.items():
         assert p["watertight"] and p["is_volume"] and p["bodies"] == 1, (name, p)
@@ -166,7 +178,8 @@ def test_random_bodies_export_watertight(tmp_path):
         occ = (d2 < radii**2).any(1).astype(float)
         robot = robot_from_occupancy(task, occ)
         d = Design("crawling", robot, task.controller())
-        rep = export_design(d, tmp_path / f"blob{k}", ExportConfig(stl=True, threemf=False))
+        rep = export_design(d, tmp_path / f"blob{k}",
+                            ExportConfig(stl=True, threemf=False, slice=False))
         body = rep["parts"]["body"]
         assert body["watertight"] and body["bodies"] == 1
         assert abs(rep["volume_check"]["ratio"] - 1) < 0.1
@@ -190,7 +203,7 @@ def test_bad_input_leaves_nothing_behind(tmp_path):
 
 def test_an_interrupted_export_keeps_the_previous_folder(tmp_path, monkeypatch):
     out = tmp_path / "finger"
-    export_design(_finger(), out, ExportConfig(threemf=False))
+    export_design(_finger(), out, ExportConfig(threemf=False, slice=False))
     before = sorted(p.name for p in out.iterdir())
     import dbtool.export.assembly as asm
 
@@ -199,7 +212,7 @@ def test_an_interrupted_export_keeps_the_previous_folder(tmp_path, monkeypatch):
 
     monkeypatch.setattr(asm, "report_markdown", boom)
     with pytest.raises(KeyboardInterrupt):
-        export_design(_finger(), out, ExportConfig(threemf=False))
+        export_design(_finger(), out, ExportConfig(threemf=False, slice=False))
     assert sorted(p.name for p in out.iterdir()) == before
     assert [p.name for p in tmp_path.iterdir()] == ["finger"]  # no partial folder left
 
@@ -228,7 +241,7 @@ def test_reference_export_is_valid_and_current(tmp_path):
     assert abs(rep["volume_check"]["ratio"] - 1) < 0.1
     tj = json.loads((REFERENCE / "tendons.json").read_text())
     assert len(tj["tendons"]) == 4 and all(len(t["points"]) == 4 for t in tj["tendons"])
-    assert rep["tendons"]["all_points_clear"]
+    assert rep["tendons"]["all_ok"]
     d = Design.load(REFERENCE / "design.npz")
     again = export_design(d, tmp_path / "again", ExportConfig(**{
         k: v for k, v in rep["config"].items()}))
@@ -248,7 +261,8 @@ def test_voronoi_infill_through_export(tmp_path):
     centre = np.array(task.design_workspace()) / 2
     occ = (np.linalg.norm(pts - centre, axis=1) < 0.009).astype(float)  # an 18 mm ball
     d = Design("crawling", robot_from_occupancy(task, occ), task.controller())
-    rep = export_design(d, tmp_path / "foam", ExportConfig(infill="voronoi", threemf=False))
+    rep = export_design(d, tmp_path / "foam",
+                        ExportConfig(infill="voronoi", threemf=False, slice=False))
     body = rep["parts"]["body"]
     assert body["watertight"] and body["is_volume"] and body["bodies"] == 1
     i = rep["infill"]
@@ -258,15 +272,40 @@ def test_voronoi_infill_through_export(tmp_path):
         "mesh_mm3"], rel=0.02)
 
 
-@pytest.mark.parametrize("smooth, lo, hi", [(0.35, 0.90, 1.0), (0.6, 0.45, 0.65)])
-def test_a_one_site_plate_keeps_its_volume_at_the_default_smoothing(smooth, lo, hi):
-    """Why SMOOTH is 0.35: a plate one site thick (24 x 24 sites) keeps 93% of its volume;
-    at 0.6 it keeps about half (docs/export.md)."""
+def _plate(smooth: float, upsample: int = 4) -> float:
     sp = 0.0025
     g = np.stack(np.meshgrid(np.arange(24), [0], np.arange(24), indexing="ij"), -1).reshape(-1, 3)
-    field = OccupancyField.from_sites((g + 0.5) * sp, np.ones(len(g), bool), sp, smooth=smooth)
-    kept = field.solid().volume() / (len(g) * (sp * 1000) ** 3)
-    assert lo < kept < hi, kept
+    field = OccupancyField.from_sites((g + 0.5) * sp, np.ones(len(g), bool), sp, smooth=smooth,
+                                      upsample=upsample)
+    return field.solid().volume() / (len(g) * (sp * 1000) ** 3)
+
+
+def test_the_volume_keeping_level_keeps_a_one_site_plate():
+    """The level that keeps the indicator's volume keeps a plate one site thick (24 x 24
+    sites) at the default smoothing: measured 1.11 of its volume (the mesh interpolates between
+    samples, which thickens a feature one site thin); it does not vanish (docs/export.md)."""
+    assert 0.9 < _plate(0.7) < 1.15
+
+
+def _ball(smooth: float, upsample: int):
+    sp = 0.0025
+    g = np.stack(np.meshgrid(*[np.arange(16)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    inside = np.linalg.norm(g - 7.5, axis=1) < 6.5
+    field = OccupancyField.from_sites((g + 0.5) * sp, inside, sp, smooth=smooth,
+                                      upsample=upsample)
+    return field.solid(), inside.sum() * (sp * 1000) ** 3
+
+
+def test_the_smoothed_ball_has_no_staircase_and_keeps_its_volume():
+    """A ball of lattice sites: the old meshing (0.35-site smoothing, half-site grid) keeps the
+    lattice's steps; the default (0.7 sites, quarter-site grid) rounds them off at equal
+    volume (docs/export.md, staircase)."""
+    from dbtool.export.report import sharp_edges
+
+    new, want = _ball(0.7, 4)
+    old, _ = _ball(0.35, 2)
+    assert abs(new.volume() / want - 1) < 0.05
+    assert sharp_edges(new) < 0.25 * sharp_edges(old), (sharp_edges(new), sharp_edges(old))
 
 
 def test_the_report_sees_a_part_as_an_stl_reader_does():

@@ -17,178 +17,23 @@ import numpy as np
 
 from dbtool.atomic import atomic_folder
 from dbtool.design import Design
-from dbtool.export._manifold import manifold3d as m3
 from dbtool.export.config import Assembly, ExportConfig
-from dbtool.export.mesh import OccupancyField, finish, largest_component, write_stl
+from dbtool.export.fields import design_fields
+from dbtool.export.gripper import build_gripper
+from dbtool.export.mesh import OccupancyField, finish, write_stl
 from dbtool.export.report import design_volume, report, report_markdown
-from dbtool.export.tendons import channel_solid, mirror_tendon, route_finger
 from dbtool.export.threemf import write_3mf
-from dbtool.export.voxels import Voxels
 from dbtool.runs import write_json
 from dbtool.sim.tasks import get_task
-from dbtool.sim.tasks.base import DX, SPACING
-from dbtool.sim.tasks.gripping import BASE, FULL
 
 __all__ = ["Assembly", "ExportConfig", "build", "design_volume", "export_design",
            "report_markdown"]
-
-INSET = 0.2  # mm between a finger and the sides of the workspace (and base)
-GLUE = 0.05  # mm of overlap that fuses the fingers to the plate in ``assembly``
-
-
-def _fields(design: Design, scale: float, extrude_top: int = 0
-            ) -> tuple[OccupancyField, dict[int, OccupancyField], float]:
-    """Fields of the body and of each actuator group's particles, and the root gap (mm).
-
-    ``extrude_top``: the topmost layer of active sites is continued upward to the top of the
-    design lattice and ``extrude_top`` layers beyond, so a finger trimmed at its root keeps
-    straight walls and meets the base. The simulator's grid (cells of two sites) joins a finger
-    to the base across a gap below one cell, so such a gap is printed solid; its size is
-    returned (0 when the finger reaches the lattice's top).
-    """
-    robot = design.robot
-    points, active = robot.points, robot.active()
-    if not active.any():
-        raise ValueError("the design has no active particles: nothing to export")
-    w = robot.actuators
-    label = np.where(w.max(1) > 0, w.argmax(1), -1) if w.size else np.full(robot.n, -1)
-    gap = 0.0
-    if extrude_top:
-        y = points[:, 1]
-        top_active = y[active].max()
-        gap = float(y.max() - top_active) * scale
-        layer = active & np.isclose(y, top_active)
-        n_up = int(round((y.max() - top_active) / SPACING)) + extrude_top
-        extra = [points[layer] + [0.0, k * SPACING, 0.0] for k in range(1, n_up + 1)]
-        points = np.vstack([points, *extra])
-        active = np.concatenate([active, np.ones(n_up * int(layer.sum()), bool)])
-        label = np.concatenate([label, np.tile(label[layer], n_up)])
-    body = OccupancyField.from_sites(points, active, SPACING, scale)
-    # every lattice site takes the group of its nearest active, actuated site, so the surfaces
-    # between regions run on through the body's surface instead of along it (no slivers)
-    owned = active & (label >= 0)
-    regions = {}
-    if owned.any():
-        from scipy.spatial import cKDTree
-
-        _, near = cKDTree(points[owned]).query(points)
-        filled = label[owned][near]
-        regions = {int(g): OccupancyField.from_sites(points, filled == g, SPACING, scale,
-                                                     frame=points, edge_pad=True)
-                   for g in np.unique(filled)}
-    return body, regions, gap
-
-
-def _root_pillars(design: Design, scale: float, root: float) -> np.ndarray | None:
-    """Square pillars (one lattice cell wide) from every active site within one simulator grid
-    cell (``DX``, two sites) of the base up into it: the sites the simulation's grid couples to
-    the glued base. Smoothing would thin a narrow root away; these keep it as designed.
-    Returns their (k, 2, 3) box corners in mm (united with the finger's field)."""
-    r = design.robot
-    a = r.active()
-    y = r.points[:, 1]
-    sel = a & (y >= y.max() - (DX / SPACING - 0.5) * SPACING)
-    if not sel.any():
-        return None
-    w = SPACING * scale  # one cell: neighbours meet (united in the field, no boolean)
-    c = r.points[sel] * scale
-    lo = np.stack([c[:, 0] - w / 2, c[:, 1] - 0.5 * SPACING * scale, c[:, 2] - w / 2], 1)
-    hi = np.stack([c[:, 0] + w / 2, np.full(len(c), root + 1.0), c[:, 2] + w / 2], 1)
-    return np.stack([lo, hi], 1)
-
-
-def _pillar_fill(design: Design, scale: float, boxes: np.ndarray | None, top: float) -> float:
-    """Volume (mm^3) of the empty lattice cells below ``top`` (mm) that the root pillars fill:
-    what the export adds to the design on purpose, where the simulator glues sites to the base
-    across an empty cell."""
-    if boxes is None:
-        return 0.0
-    cell = SPACING * scale
-    r = design.robot
-    active = {tuple(v) for v in np.round(r.points[r.active()] / SPACING - 0.5).astype(int)}
-    filled = set()
-    for lo, hi in boxes:
-        i, k = int(round(lo[0] / cell)), int(round(lo[2] / cell))
-        for j in range(int(round(lo[1] / cell)), int(np.floor(min(hi[1], top) / cell + 1e-6))):
-            filled.add((i, j, k))
-    return len(filled - active) * cell**3
-
-
-def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
-    s = cfg.scale_mm
-    t0 = time.perf_counter()
-    body, regions, gap = _fields(design, s, extrude_top=3)
-    root = (FULL[1] - BASE) * s  # the base's lower face; the finger hangs below it
-    # the finger stays INSET inside its workspace's sides: a finger face nearly coplanar with
-    # the base's side face leaves edges of 1e-6 mm in the fused assembly (an STL cannot keep them)
-    ws = np.array([[INSET, -1.0, INSET], [FULL[0] * s - INSET, root + 2.0, FULL[2] * s - INSET]])
-    pillars = _root_pillars(design, s, root)
-    finger = body.solid(keep_largest=False, boxes=pillars, clip=ws)
-    finger = finger.trim_by_plane([0.0, -1.0, 0.0], -root)  # keep y <= root
-    finger = largest_component(finger)
-    plane = FULL[2] / 2 * s  # the finger lies in z < plane, its mirror in z > plane
-    base = m3.Manifold.cube([FULL[0] * s, BASE * s, FULL[2] * s]).translate([0.0, root, 0.0])
-    t_mesh = time.perf_counter()
-    vox = Voxels.of(finger, cfg.pitch)
-    tendons = route_finger(finger, regions, "finger", FULL[1] * s, root, cfg.radius, cfg.min_wall,
-                           {0: -1.0, 1: +1.0}, cfg.pitch, voxels=vox,
-                           base_xz=(0.0, 0.0, FULL[0] * s, FULL[2] * s))
-    tendons += [mirror_tendon(t, plane, "finger_mirror") for t in tendons]
-    t_route = time.perf_counter()
-    # the volume check compares the part of the finger the design holds (below its top sites)
-    design_top = (design.robot.points[design.robot.active(), 1].max() + SPACING / 2) * s
-    body_volume = finger.trim_by_plane([0.0, -1.0, 0.0], -design_top).volume()
-    fill = _pillar_fill(design, s, pillars, design_top)
-    bridge = finger.volume() - body_volume
-    info: dict = {}
-    if cfg.infill == "voronoi":
-        from dbtool.export.infill import InfillConfig, voronoi_infill
-
-        foam, info = voronoi_infill(finger, InfillConfig(shell=cfg.shell))
-        if cfg.channels:  # a solid sleeve keeps each channel a closed tube through the foam
-            sleeves = [channel_solid(t, cfg.radius + cfg.min_wall, root) for t in tendons
-                       if t.finger == "finger"]
-            foam = foam + (m3.Manifold.batch_boolean(sleeves, m3.OpType.Add) ^ finger)
-        finger = foam
-    t_infill = time.perf_counter()
-    # four mounting holes through the plate, 8 mm in from its corners
-    r = 0.5 * cfg.mount_hole
-    holes = []
-    for x in (8.0, FULL[0] * s - 8.0):
-        for z in (8.0, FULL[2] * s - 8.0):
-            hole = m3.Manifold.cylinder(BASE * s + 2.0, r, r, 24)
-            holes.append(hole.rotate([-90.0, 0.0, 0.0]).translate([x, root - 1.0, z]))
-    # the fingers only touch the plate's lower face; in the fused assembly the plate reaches
-    # GLUE lower so fingers and plate overlap and join into one body (one box, cut once: a
-    # separate glue slab shares the holes' walls with the plate, which leaves slivers)
-    plate = m3.Manifold.cube([FULL[0] * s, BASE * s + GLUE, FULL[2] * s])
-    plate = plate.translate([0.0, root - GLUE, 0.0])
-    cut = m3.Manifold.batch_boolean(holes, m3.OpType.Add)
-    if cfg.channels:  # cut the designed finger; its mirror copy stays its exact reflection
-        tubes = m3.Manifold.batch_boolean([channel_solid(t, cfg.radius, root) for t in tendons
-                                           if t.finger == "finger"], m3.OpType.Add)
-        finger = finger - tubes
-        cut = cut + tubes + tubes.mirror([0.0, 0.0, 1.0]).translate([0.0, 0.0, 2 * plane])
-    base, plate = finish(base - cut), plate - cut
-    finger = finish(finger)
-    mirror = finger.mirror([0.0, 0.0, 1.0]).translate([0.0, 0.0, 2 * plane])
-    t_channels = time.perf_counter()
-    parts = {"finger": finger, "finger_mirror": mirror, "base": base}
-    union = finish(m3.Manifold.batch_boolean([finger, mirror, plate], m3.OpType.Add))
-    timings = {"mesh_s": t_mesh - t0, "routing_s": t_route - t_mesh,
-               "infill_s": t_infill - t_route, "channels_s": t_channels - t_infill,
-               "assembly_s": time.perf_counter() - t_channels}
-    notes = {"root_gap_mm": round(gap, 3), "root_bridge_mm3": round(bridge, 1),
-             "root_pillar_fill_mm3": round(fill, 1)}
-    return Assembly(parts, union, tendons, design_volume(design, s, largest=True),
-                    body_volume, timings, info, notes)
-
 
 def build_body(design: Design, cfg: ExportConfig) -> Assembly:
     """Any other task: the body, and the actuator regions as parts inside it."""
     s = cfg.scale_mm
     t0 = time.perf_counter()
-    body_field, regions, _ = _fields(design, s)
+    body_field, regions, _ = design_fields(design, s)
     body = body_field.solid()
     parts: dict = {"body": body}
     for g, f in sorted(regions.items()):
@@ -226,40 +71,156 @@ def build(design: Design, cfg: ExportConfig | None = None) -> Assembly:
     return build_body(design, cfg)
 
 
+SOFT = ("TPU 95A (soft)", "#E07020")
+RIGID = ("PLA (rigid)", "#8C8C8C")
+SLICE_AS = {"TPU 95A (soft)": "flex", "PLA (rigid)": "pla"}
+ACTUATOR_COLOURS = ("#D62728", "#1F77B4", "#2CA02C", "#9467BD", "#FF7F0E", "#8C564B")
+
+
+def materials(parts: dict) -> dict[str, tuple[str, str]]:
+    """Material and colour per part: soft fingers and bodies, a rigid base; actuator regions in
+    the soft material, one colour per group."""
+    out = {}
+    for k in parts:
+        if k == "base":
+            out[k] = RIGID
+        elif k.startswith("actuator_"):
+            g = int(k.split("_")[1])
+            out[k] = (SOFT[0], ACTUATOR_COLOURS[g % len(ACTUATOR_COLOURS)])
+        else:
+            out[k] = SOFT
+    return out
+
+
+def poses(asm: Assembly, cfg: ExportConfig) -> dict:
+    """Print pose per part (docs/export.md, "Print orientation"): each gripper part its own;
+    a body's actuator regions share the body's, so they still tile it."""
+    from dbtool.export.orient import PrintPose, choose_pose
+
+    if not cfg.orient:  # the parts stay in the design's frame
+        return {k: PrintPose(np.array([0.0, 0.0, -1.0]), np.eye(4), 0.0, 0.0,
+                             float(np.ptp(np.reshape(v.bounding_box(), (2, 3))[:, 2])), [])
+                for k, v in asm.parts.items()}
+    if "body" in asm.parts:
+        pose = choose_pose(asm.parts["body"])
+        return {k: pose for k in asm.parts}
+    return {k: choose_pose(v) for k, v in asm.parts.items()}
+
+
 def export_design(design: Design, out_dir: Path, cfg: ExportConfig | None = None,
                   name: str | None = None) -> dict:
-    """Write the parts (STL and/or 3MF), ``tendons.json``, ``tendons.png``, ``report.json`` and
-    ``report.md`` into ``out_dir``; returns the report.
+    """Write the parts (STL and/or 3MF, in their print orientation), ``assembly.stl`` (the
+    gripper fused, in its own frame), ``tendons.json``, ``tendons.png``, ``assembly.md``,
+    ``exploded.png``, ``report.json`` and ``report.md`` into ``out_dir``; returns the report.
 
     Everything is written into a hidden sibling folder first and renamed into place at the end,
     so an interrupted export never leaves a folder that looks complete.
     """
+    from dbtool.export.orient import apply_pose
+    from dbtool.export.threemf import plate_layout
+
     cfg = cfg or ExportConfig()
     out_dir = Path(out_dir)
     name = name or out_dir.name
     asm = build(design, cfg)
+    mats = materials(asm.parts)
+    pose = poses(asm, cfg)
+    posed = {k: apply_pose(v, pose[k]) for k, v in asm.parts.items()}
     with atomic_folder(out_dir) as tmp:
         files = []
         t0 = time.perf_counter()
-        for part, solid in asm.parts.items():
+        for part, solid in posed.items():
             if cfg.stl:
                 files.append(write_stl(solid, tmp / f"{part}.stl").name)
         if cfg.stl and design.task == "gripping":
             files.append(write_stl(asm.union, tmp / "assembly.stl").name)
         if cfg.threemf:
-            objs = {k: v for k, v in asm.parts.items() if not (k == "body" and len(asm.parts) > 1)}
-            files.append(write_3mf(objs, tmp / "assembly.3mf").name)
+            if "body" in posed and len(posed) > 1:  # the regions, which together are the body
+                objs = {k: v for k, v in posed.items() if k != "body"}
+                layout = None
+            else:
+                objs, layout = posed, plate_layout(posed)
+            files.append(write_3mf(objs, tmp / "assembly.3mf", {k: mats[k] for k in objs},
+                                   layout).name)
         t_write = time.perf_counter() - t0
+        sliced = _slice(posed, mats, tmp, cfg)
         rep = report(design, asm, cfg, name, files)
         rep["timings_s"]["write_s"] = round(t_write, 3)
+        rep["timings_s"]["slice_s"] = round(time.perf_counter() - t0 - t_write, 3)
+        for k, p in pose.items():
+            rep["parts"][k]["material"] = mats[k][0]
+            rep["parts"][k]["print_pose"] = p.as_json()
+        rep["slicer"] = sliced
+        if design.task == "gripping":
+            _gripper_files(design, asm, cfg, rep, tmp, name)
         write_json(tmp / "report.json", rep)
         (tmp / "report.md").write_text(report_markdown(rep))
-        if design.task == "gripping":
-            tj = {"units": "mm", "frame": "gripper workspace, y up, base on top",
-                  "channel_diameter_mm": cfg.channel_diameter, "min_wall_mm": cfg.min_wall,
-                  "channels_cut": cfg.channels, "tendons": [t.as_json() for t in asm.tendons]}
-            write_json(tmp / "tendons.json", tj)
-            from dbtool.export.drawing import draw_tendons
-
-            draw_tendons(asm, tmp / "tendons.png", title=name)
     return rep
+
+
+def _slice(posed: dict, mats: dict, tmp: Path, cfg: ExportConfig) -> dict:
+    """PrusaSlicer's verdict on each printable part (docs/export.md, "Printability"), or why
+    there is none."""
+    from dbtool.export.slicer import find_slicer, slice_parts
+
+    if not cfg.slice:
+        return {"skipped": "--no-slice"}
+    if find_slicer() is None:
+        return {"skipped": "PrusaSlicer not installed (apt-get install prusa-slicer, or set "
+                           "DBTOOL_SLICER)"}
+    printable = {k: v for k, v in posed.items() if not k.startswith("actuator_")}
+    stls = {}
+    for k, v in printable.items():
+        path = tmp / f"{k}.stl"
+        if not path.exists():  # 3MF only: slice a temporary STL
+            path = write_stl(v, tmp / f".slice-{k}.stl")
+        stls[k] = path
+    results = slice_parts(stls, {k: SLICE_AS[mats[k][0]] for k in stls})
+    for p in tmp.glob(".slice-*.stl"):
+        p.unlink()
+    return {k: r.as_json() for k, r in results.items()}
+
+
+def _gripper_files(design: Design, asm: Assembly, cfg: ExportConfig, rep: dict, tmp: Path,
+                   name: str) -> None:
+    """``tendons.json``, ``tendons.png``, ``assembly.md`` and ``exploded.png``."""
+    from dbtool.export.drawing import draw_tendons
+    from dbtool.export.sheet import draw_exploded, write_assembly_md
+
+    tj = {"units": "mm", "frame": "gripper workspace, y up, base on top",
+          "channel_diameter_mm": cfg.line_channel, "tube_seat_diameter_mm": 2 * cfg.seat_radius,
+          "min_wall_mm": cfg.min_wall, "bend_radius_mm": cfg.bend_radius,
+          "channels_cut": cfg.channels, "tendons": [t.as_json() for t in asm.tendons]}
+    write_json(tmp / "tendons.json", tj)
+    draw_tendons(asm, tmp / "tendons.png", title=name)
+    sheet = assembly_sheet(asm, cfg, rep, name)
+    write_assembly_md(sheet, tmp / "assembly.md")
+    draw_exploded(sheet, tmp / "exploded.png")
+
+
+def assembly_sheet(asm: Assembly, cfg: ExportConfig, rep: dict, name: str) -> dict:
+    """What the assembly sheet needs (:mod:`dbtool.export.sheet`), from an export's report."""
+    mats = materials(asm.parts)
+    sliced = rep.get("slicer", {})
+    prints = {}
+    for k in asm.parts:
+        pose = rep["parts"][k]["print_pose"]
+        s = sliced.get(k) if isinstance(sliced.get(k), dict) else None
+        prints[k] = {"down": pose["down"], "height_mm": pose["height_mm"],
+                     "overhang_mm2": pose["overhang_mm2"], "file": f"{k}.stl",
+                     "slicer": None if s is None else {
+                         "ok": s["ok"], "layers": s["layers"], "print_time_s": s["print_time_s"],
+                         "filament_g": s["filament_g"], "filament_m": s["filament_mm"] / 1000}}
+    m = asm.mounting
+    return {
+        "name": name, "parts": asm.parts, "materials": mats, "print": prints,
+        "holes": {"holes": m["holes"], "diameter_mm": m["diameter_mm"],
+                  "keepout_mm": m["keepout_mm"], "pattern_mm": m.get("pattern_mm")},
+        "pins": m["pins"] + m["pins_mirror"],
+        "pin": {"diameter_mm": cfg.pin_diameter, "length_mm": cfg.pin_length},
+        "tendons": [t.as_json() for t in asm.tendons],
+        "hardware": {"line_diameter_mm": cfg.tendon_diameter, "tube_od_mm": cfg.tube_diameter,
+                     "tube_id_mm": cfg.tube_diameter / 2, "tube_length_mm": cfg.tube_length,
+                     "screw": "M3 x 12 socket head", "knot_pocket_mm": cfg.knot_pocket},
+        "glue_mm2": asm.notes.get("glue_face_mm2", 0.0),
+    }

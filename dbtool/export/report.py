@@ -57,6 +57,25 @@ def wall_thickness(solid, cap: float = WALL_CAP, eps: float = 1e-3,
     return out
 
 
+SHARP_DEG = 30.0  # an edge where the surface turns more than this is a step (staircase)
+
+
+def sharp_edges(solid, planes: tuple = (), angle: float = SHARP_DEG) -> float:
+    """The lattice staircase, measured: length (mm) of the edges where the surface turns by more
+    than ``angle`` degrees, per 100 mm^2 of surface. Edges of faces lying on one of ``planes``
+    ((axis, value) in mm: the cut faces, a root glued flat) are not counted, nor their area."""
+    tm = to_trimesh(solid, weld=True)
+    on = np.zeros(len(tm.faces), bool)
+    for axis, value in planes:
+        on |= (np.abs(tm.triangles[:, :, axis] - value) < 0.02).all(1)
+    adj = tm.face_adjacency
+    keep = ~on[adj].any(1) & (tm.face_adjacency_angles > np.radians(angle))
+    e = tm.face_adjacency_edges[keep]
+    length = np.linalg.norm(tm.vertices[e[:, 0]] - tm.vertices[e[:, 1]], axis=1).sum()
+    area = tm.area_faces[~on].sum()
+    return float(100.0 * length / area) if area > 0 else 0.0
+
+
 def mesh_report(solid, thickness: bool = True) -> dict:
     """Fabrication checks of one part: watertightness, bodies, genus, volume, bounding box and
     the thinnest wall (ray cast along the inward normal of every triangle).
@@ -103,13 +122,39 @@ def report(design: Design, asm: Assembly, cfg: ExportConfig, name: str, files: l
         "metrics": design.metrics,
     }
     if asm.tendons:
+        ts = asm.tendons
         rep["tendons"] = {
-            "count": len(asm.tendons), "points_per_tendon": len(asm.tendons[0].points),
-            "channel_radius_mm": cfg.radius, "min_wall_mm": cfg.min_wall,
-            "min_point_depth_mm": min(min(t.depth_mm) for t in asm.tendons),
-            "channel_clearance_mm": min(t.clearance_mm for t in asm.tendons),
-            "all_points_clear": all(t.ok for t in asm.tendons),
+            "count": len(ts), "points_per_tendon": len(ts[0].points),
+            "channel_diameter_mm": cfg.line_channel, "channel_radius_mm": cfg.radius,
+            "tube_seat_diameter_mm": 2 * cfg.seat_radius, "min_wall_mm": cfg.min_wall,
+            "bend_radius_mm": cfg.bend_radius,
+            "min_point_depth_mm": min(min(t.depth_mm) for t in ts),
+            "channel_clearance_mm": min(t.clearance_mm for t in ts),
+            "wall_samples": sum(t.wall_samples for t in ts),
+            "min_bend_radius_mm": min((t.min_bend_radius_mm for t in ts
+                                       if t.min_bend_radius_mm is not None), default=None),
+            "through_holes": sum(bool(t.tip) for t in ts),
+            "knot_pockets": sum(t.pocket_mm > 0 for t in ts),
+            "pocket_mm": {t.name: t.pocket_mm for t in ts},
+            "routes": sorted({t.route for t in ts}),
+            "length_mm": {t.name: t.length_mm for t in ts},
+            "failures": {t.name: t.failures for t in ts if t.failures},
+            "all_ok": all(t.ok for t in ts),
         }
+    if asm.mounting:
+        m = asm.mounting
+        rep["mounting"] = {**m, "holes_clear": all(v == 0 for v in m["clearance_mm3"])}
+    if "finger" in asm.parts:
+        from dbtool.sim.tasks.gripping import BASE, FULL
+
+        s = cfg.scale_mm
+        inset = 0.2
+        planes = ((1, (FULL[1] - BASE) * s), (0, inset), (0, FULL[0] * s - inset), (2, inset))
+        rep["staircase"] = {"part": "finger", "sharp_edges_mm_per_100mm2": round(
+            sharp_edges(asm.parts["finger"], planes), 2), "angle_deg": SHARP_DEG}
+    elif "body" in asm.parts:
+        rep["staircase"] = {"part": "body", "sharp_edges_mm_per_100mm2": round(
+            sharp_edges(asm.parts["body"]), 2), "angle_deg": SHARP_DEG}
     if asm.infill:
         rep["infill"] = asm.infill
     return rep
@@ -143,15 +188,56 @@ def report_markdown(rep: dict) -> str:
         lines += ["", f"**Loose pieces dropped:** {dropped:.0f} mm³ of the design "
                       f"({dropped / v['design_total_mm3']:.1%}) is not connected to its largest "
                       "piece and was left out."]
+    if "staircase" in rep:
+        st = rep["staircase"]
+        lines += ["", f"Surface: {st['sharp_edges_mm_per_100mm2']:.2f} mm of edges turning more "
+                      f"than {st['angle_deg']:g}° per 100 mm² of the {st['part']}'s surface (the "
+                      "lattice's staircase; cut faces not counted)."]
     if "tendons" in rep:
         t = rep["tendons"]
-        lines += ["", f"Tendons: {t['count']} ({t['points_per_tendon']} routing points each), "
-                      f"channel radius {t['channel_radius_mm']} mm, routing points at least "
-                      f"{t['min_point_depth_mm']:.2f} mm deep (needed "
-                      f"{t['channel_radius_mm'] + t['min_wall_mm']:.2f}); thinnest wall around "
-                      f"a channel along the paths {t['channel_clearance_mm']:.2f} mm; all points "
-                      f"clear: {t['all_points_clear']}. Channels cut: "
+        verdict = "all clear" if t["all_ok"] else "**FAILING: " + "; ".join(
+            f"{k}: {', '.join(v)}" for k, v in t["failures"].items()) + "**"
+        bend = ("none: straight channels" if t["min_bend_radius_mm"] is None
+                else f"{t['min_bend_radius_mm']:.2f} mm")
+        lines += ["", f"Tendons: {t['count']} ({t['points_per_tendon']} routing points each, "
+                      f"routes: {', '.join(t['routes'])}); line channel "
+                      f"{t['channel_diameter_mm']:g} mm, tube seat "
+                      f"{t['tube_seat_diameter_mm']:g} mm; thinnest wall along "
+                      f"the paths {t['channel_clearance_mm']:.2f} mm (needed {t['min_wall_mm']:g}"
+                      f", measured at {t['wall_samples']} points every 0.5 mm); smallest bend "
+                      f"radius {bend} (needed {t['bend_radius_mm']:g} mm);"
+                      f" through-holes at the tip {t['through_holes']}, knot pockets "
+                      f"{t['knot_pockets']} (Ø "
+                      f"{', '.join(f'{v:g}' for v in t['pocket_mm'].values())} mm); {verdict}. "
+                      "Channels cut: "
                       f"{rep['config']['channels']}."]
+    if "mounting" in rep:
+        m = rep["mounting"]
+        holes = ", ".join(f"({x:.1f}, {z:.1f})" for x, z in m["holes"])
+        lines += ["", f"Mounting: {len(m['holes'])} × Ø{m['diameter_mm']:g} mm holes at (x, z) "
+                      f"{holes}; no finger within {m['keepout_mm']:.1f} mm of a hole's axis: "
+                      f"{m['holes_clear']}. Alignment pins per finger: {len(m['pins'])} "
+                      f"(Ø{m['pin_diameter_mm']:g} × {m['pin_length_mm']:g} mm)."]
+    poses = [(k, p["print_pose"]) for k, p in rep["parts"].items() if "print_pose" in p]
+    if poses:
+        lines += ["", "| part | material | print: down | height (mm) | overhang (mm²) |",
+                  "| --- | --- | --- | ---: | ---: |"]
+        for k, p in poses:
+            down = "(" + ", ".join(f"{v:g}" for v in np.round(p["down"], 3)) + ")"
+            lines.append(f"| {k} | {rep['parts'][k].get('material', '')} | {down} | "
+                         f"{p['height_mm']:.1f} | {p['overhang_mm2']:.0f} |")
+    sl = rep.get("slicer", {})
+    if "skipped" in sl:
+        lines += ["", f"Slicer check skipped: {sl['skipped']}."]
+    elif sl:
+        lines += ["", "| part (PrusaSlicer, 0.2 mm layers) | profile | clean | layers | "
+                      "time (h) | filament (g) | support (mm) |",
+                  "| --- | --- | --- | ---: | ---: | ---: | ---: |"]
+        for k, r in sl.items():
+            lines.append(f"| {k} | {r['material']} | {r['ok']} | {r['layers']} | "
+                         f"{r['print_time_s'] / 3600:.2f} | {r['filament_g']:.1f} | "
+                         f"{r['support_mm']:.0f} |")
+            lines += [f"  - {msg}" for msg in r["messages"]]
     if "infill" in rep:
         i = rep["infill"]
         lines += ["", f"Voronoi infill: relative density {i['relative_density']:.3f} "

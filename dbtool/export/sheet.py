@@ -39,8 +39,8 @@ STEPS = ("Print the parts", "Clean the channels", "Check the pins", "Glue the fi
          "Connect the motors")
 
 
-def _f(x: float, nd: int = 1) -> str:
-    return f"{float(x):.{nd}f}"
+def _f(x: float | None, nd: int = 1) -> str:
+    return "–" if x is None else f"{float(x):.{nd}f}"
 
 
 def cut_lengths(sheet: dict) -> tuple[list[float], float]:

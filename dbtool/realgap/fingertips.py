@@ -13,11 +13,28 @@ import numpy as np
 TIP_QUANTILE = 0.15  # the lowest share of a finger's material that is its tip
 
 
+def _print_pose(path: Path) -> np.ndarray | None:
+    """The part's print pose (gripper frame -> print frame, 4 x 4) from the export's
+    ``report.json`` (docs/export.md), or None when the part was written in the gripper frame."""
+    import json
+
+    rep = path.parent / "report.json"
+    if not rep.is_file():
+        return None
+    part = json.loads(rep.read_text()).get("parts", {}).get(path.stem, {})
+    pose = part.get("print_pose")
+    return None if pose is None else np.asarray(pose["matrix"], float)
+
+
 def mesh_tip(path: str | Path, pitch: float = 1.0) -> np.ndarray:
-    """Centroid (mm) of the lowest ``TIP_QUANTILE`` of a finger mesh's filled voxels."""
+    """Centroid (mm, gripper frame) of the lowest ``TIP_QUANTILE`` of a finger mesh's filled
+    voxels; a part written in its print orientation is turned back first."""
     import trimesh
 
     mesh = trimesh.load(path, force="mesh")
+    pose = _print_pose(Path(path))
+    if pose is not None:
+        mesh.apply_transform(np.linalg.inv(pose))
     pts = mesh.voxelized(pitch).fill().points
     y = pts[:, 1]
     return pts[y <= np.quantile(y, TIP_QUANTILE)].mean(0)

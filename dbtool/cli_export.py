@@ -1,0 +1,79 @@
+"""``dbtool export``: a design -> files a printer accepts and a maker can assemble
+(docs/export.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from dbtool.cli_common import guarded
+
+
+def export_command(
+    run_dir: Path = typer.Argument(None, help="run directory (default: the newest under runs/)"),
+    design: Path = typer.Option(None, help="a design file (.npz) instead of a run directory"),
+    stl: bool = typer.Option(False, "--stl", help="write binary STL meshes"),
+    threemf: bool = typer.Option(False, "--3mf", help="write assembly.3mf (one object per part, "
+                                                     "a material each, laid out on a plate)"),
+    channels: bool = typer.Option(True, "--channels/--no-channels",
+                                  help="cut the tendon channels, tube seats and knot pockets"),
+    tendon_diameter: float = typer.Option(0.5, min=0.05, help="tendon line diameter (mm)"),
+    tube_diameter: float = typer.Option(2.0, min=0.1, help="PTFE tube outer diameter (mm)"),
+    clearance: float = typer.Option(0.4, min=0.0, help="added to line and tube diameters (mm)"),
+    channel_diameter: float = typer.Option(None, min=0.1, help="line channel diameter (mm); "
+                                                               "default line + clearance"),
+    bend_radius: float = typer.Option(5.0, min=0.1, help="least bend radius of a channel (mm)"),
+    min_wall: float = typer.Option(1.0, min=0.0, help="material kept around a channel (mm)"),
+    infill: str = typer.Option("none", help="none | voronoi (2.5 mm cells, 0.4 mm beams)"),
+    shell: float = typer.Option(1.2, min=0.1, help="solid skin around the infill (mm)"),
+    scale_mm: float = typer.Option(1000.0, "--scale-mm", min=1e-3,
+                                   help="mm per simulation unit (the finger: 60 x 72.5 x 42.5 mm)"),
+    orient: bool = typer.Option(True, "--orient/--no-orient",
+                                help="write the parts in their print orientation"),
+    slice_: bool = typer.Option(True, "--slice/--no-slice",
+                                help="check every part with PrusaSlicer when it is installed"),
+    out: Path = typer.Option(Path("exports"), help="parent folder; writes OUT/<design-name>/"),
+) -> None:
+    """Export a design for fabrication (docs/export.md): watertight, smooth parts in mm, in
+    their print orientation; the mirrored gripper on its base with mounting holes, alignment
+    pins and tendon channels; a slicer check, an assembly sheet and a report. With neither
+    --stl nor --3mf, writes both."""
+    from dbtool.design import Design
+    from dbtool.export.assembly import ExportConfig, export_design
+    from dbtool.runs import design_name, find_design
+
+    with guarded():
+        path = find_design(run_dir, design)
+        cfg = ExportConfig(scale_mm=scale_mm, stl=stl or not threemf, threemf=threemf or not stl,
+                           channels=channels, tendon_diameter=tendon_diameter,
+                           tube_diameter=tube_diameter, clearance=clearance,
+                           channel_diameter=channel_diameter, bend_radius=bend_radius,
+                           min_wall=min_wall, infill=infill, shell=shell, orient=orient,
+                           slice=slice_)
+        name = design_name(path)
+        d = Design.load(path)
+        rep = export_design(d, out / name, cfg)
+    extra = ["tendons.json", "tendons.png", "assembly.md", "exploded.png"]
+    for f in rep["files"] + ["report.json", "report.md"] + (extra if "tendons" in rep else []):
+        typer.echo(f"wrote {out / name / f}")
+    main = rep["parts"]["assembly" if "assembly" in rep["parts"] else "body"]
+    typer.echo(f"{d.task}: watertight={main['watertight']} bodies={main['bodies']} "
+               f"volume={main['volume_mm3']:.0f} mm^3 bbox={main['bbox_mm']} mm")
+    if "tendons" in rep:
+        t = rep["tendons"]
+        typer.echo(f"tendons: {t['count']} x {t['points_per_tendon']} routing points, thinnest "
+                   f"wall along the channels {t['channel_clearance_mm']:.2f} mm, smallest bend "
+                   f"radius {t['min_bend_radius_mm'] or 'none (straight)'} mm")
+        for name_, why in t["failures"].items():
+            typer.echo(f"warning: {name_}: {'; '.join(why)}", err=True)
+    if "mounting" in rep and not rep["mounting"]["holes_clear"]:
+        typer.echo("warning: a mounting hole is covered by a finger", err=True)
+    sl = rep.get("slicer", {})
+    if "skipped" in sl:
+        typer.echo(f"slicer check skipped: {sl['skipped']}")
+    for part, r in sl.items():
+        if isinstance(r, dict):
+            state = "clean" if r["ok"] else "NOT clean: " + "; ".join(r["messages"])
+            typer.echo(f"slicer ({r['material']}): {part} {state}, {r['layers']} layers, "
+                       f"{r['print_time_s'] / 3600:.1f} h, {r['filament_g']:.0f} g")
