@@ -4,6 +4,11 @@ validation of exports of many designs.
 ``time``: wall time of meshing, tendon routing, assembly, channels and Voronoi infill for one
 gripper design (the newest ``runs/*/design.npz`` of gripping, or ``--design``).
 
+``makers``: exports the reference gripper and the gripper designs in ``benchmarks/data/grippers``
+(other seeds) with the defaults (channels, print orientation, slicer check) and runs a maker's
+checks on each folder from its files alone (:func:`dbtool.export.verify.verify_export`, also
+slicing every part with the flexible-filament profile).
+
 ``validate``: exports designs (``--designs`` files, e.g. the six tasks' ``dbtool design``
 outputs) and ``--random N`` random robotized bodies (procedural corpus shapes of random families
 robotized for random tasks), then checks every part as a printer would: watertight and a volume
@@ -17,6 +22,7 @@ Usage::
 
     python benchmarks/export.py time --design runs/design-gripping-.../design.npz [--infill]
     python benchmarks/export.py validate --designs runs/*/design.npz --random 10
+    python benchmarks/export.py makers
 """
 
 from __future__ import annotations
@@ -168,6 +174,70 @@ def validate(paths: list[Path], n_random: int, seed: int, channels: bool) -> dic
     return {"designs": rows, "passed": n_ok, "total": len(rows)}
 
 
+GRIPPERS = [Path(__file__).parents[1] / "exports" / "gripping-seed0" / "design.npz",
+            *sorted((Path(__file__).parent / "data" / "grippers").glob("*.npz"))]
+# DiffuseBot's quick-budget grippers of seeds 1 and 2 (docs/results.md): plates 5-7.5 mm tall
+# that never touch the cube; no channel with round bends fits, and the export says so
+DEGENERATE = sorted((Path(__file__).parent / "data" / "grippers" / "degenerate").glob("*.npz"))
+
+
+def makers(paths: list[Path]) -> dict:
+    from dbtool.design import Design
+    from dbtool.export.assembly import ExportConfig, export_design
+    from dbtool.export.verify import verify_export
+
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for p in paths:
+            name = p.parent.name if p.name == "design.npz" else p.stem
+            t0 = time.perf_counter()
+            rep = export_design(Design.load(p), Path(tmp) / name, ExportConfig())
+            t1 = time.perf_counter()
+            v = verify_export(Path(tmp) / name, slice_flex=True)
+            t = rep["tendons"]
+            rows[name] = {
+                "ok": v["ok"], "degenerate": p in DEGENERATE, "export_s": t1 - t0,
+                "verify_s": time.perf_counter() - t1,
+                "watertight_one_body": all(x["watertight"] and x["bodies"] == 1
+                                           for x in v["parts"].values()),
+                "slicer_clean": all(v["slicer"].values()),
+                "slicer_flex_clean": all(x["ok"] for x in v["slicer_flex"].values()),
+                "slicer": rep["slicer"], "holes_clear": v["holes"]["clear"],
+                "holes": rep["mounting"]["holes"], "pins": len(rep["mounting"]["pins"]),
+                "walls_ok": all(x["wall_ok"] for x in v["tendons"]),
+                "wall_min_mm": t["channel_clearance_mm"], "wall_samples": t["wall_samples"],
+                "min_bend_radius_mm": t["min_bend_radius_mm"], "routes": t["routes"],
+                "through_holes": sum(x["through_hole"] for x in v["tendons"]),
+                "pockets": t["pocket_mm"], "oriented": v["oriented"] and v["base_flat"],
+                "downs": {k: rep["parts"][k]["print_pose"]["down"] for k in
+                          ("finger", "finger_mirror", "base")},
+                "staircase": rep["staircase"]["sharp_edges_mm_per_100mm2"],
+                "volume_ratio": rep["volume_check"]["ratio"], "failures": t["failures"],
+                "thinnest_wall_mm": {k: rep["parts"][k]["min_wall_mm"]
+                                     for k in ("finger", "base")},
+            }
+            r = rows[name]
+            print(f"{name}: ok={r['ok']} ({r['export_s']:.0f} s + {r['verify_s']:.0f} s)",
+                  flush=True)
+    print("\n| design | watertight, 1 body | slicer clean (own / flex) | holes clear | "
+          "wall along paths (mm) | smallest bend (mm) | through-holes, pockets (mm) | "
+          "oriented | staircase | volume ratio |\n|" + " --- |" * 10)
+    for name, r in rows.items():
+        bend = "straight" if r["min_bend_radius_mm"] is None else f"{r['min_bend_radius_mm']:.1f}"
+        pockets = "/".join(f"{v:g}" for v in r["pockets"].values())
+        print(f"| {name} | {r['watertight_one_body']} | {r['slicer_clean']} / "
+              f"{r['slicer_flex_clean']} | {r['holes_clear']} | {r['wall_min_mm']:.2f} "
+              f"({r['wall_samples']} pts) | {bend} | {r['through_holes']}, {pockets} | "
+              f"{r['oriented']} | {r['staircase']:.2f} | {r['volume_ratio']:.3f} |")
+    real = {k: r for k, r in rows.items() if not r["degenerate"]}
+    n_ok = sum(r["ok"] for r in real.values())
+    print(f"\n{n_ok} of {len(real)} gripper exports pass every maker check")
+    for k, r in rows.items():
+        if r["degenerate"]:
+            print(f"{k} (degenerate): ok={r['ok']}, reported failures: {r['failures']}")
+    return {"designs": rows, "passed": n_ok, "total": len(real)}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -179,6 +249,8 @@ def main() -> None:
     v.add_argument("--random", type=int, default=10)
     v.add_argument("--seed", type=int, default=0)
     v.add_argument("--channels", action="store_true", help="cut channels in grippers")
+    mk = sub.add_parser("makers")
+    mk.add_argument("--designs", type=Path, nargs="*", default=GRIPPERS + DEGENERATE)
     args = ap.parse_args()
     config = {"benchmark": f"export {args.cmd}", **vars(args)}
     if args.cmd == "time":
@@ -188,6 +260,10 @@ def main() -> None:
         config.update(design=path, design_sha256=file_digest(path))
         result = {"time": time_export(path, args.infill)}
         write_result(result, None, RESULTS / "export-time.json", False, config)
+    elif args.cmd == "makers":
+        config["designs_sha256"] = [file_digest(p) for p in args.designs]
+        result = {"makers": makers(args.designs)}
+        write_result(result, None, RESULTS / "export-makers.json", False, config)
     else:
         config["designs_sha256"] = [file_digest(p) for p in args.designs]
         result = {"validate": validate(args.designs, args.random, args.seed, args.channels)}

@@ -190,6 +190,7 @@ def _gripper_files(design: Design, asm: Assembly, cfg: ExportConfig, rep: dict, 
     tj = {"units": "mm", "frame": "gripper workspace, y up, base on top",
           "channel_diameter_mm": cfg.line_channel, "tube_seat_diameter_mm": 2 * cfg.seat_radius,
           "min_wall_mm": cfg.min_wall, "bend_radius_mm": cfg.bend_radius,
+          "knot_depth_mm": cfg.knot_depth,
           "channels_cut": cfg.channels, "tendons": [t.as_json() for t in asm.tendons]}
     write_json(tmp / "tendons.json", tj)
     draw_tendons(asm, tmp / "tendons.png", title=name)

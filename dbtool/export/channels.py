@@ -9,7 +9,7 @@ inside the finger, every 0.5 mm: the distance from the centreline to the surface
 with everything else cut from it (the other channels, the pin pockets; not the glued root face),
 less the channel's radius. A path that keeps less than the minimum is re-routed (the deepest
 straightest run within 2.5 mm of the largest moment arm, then the deepest routing points, then a
-central root entry); if no route keeps
+straight run from the root face to the deepest route's anchor); if no route keeps
 it, the tendon is reported as failing with where and by how much.
 """
 
@@ -24,7 +24,7 @@ from dbtool.export.tendons import ROLES, Tendon, root_entry, routing_points
 from dbtool.export.voxels import Voxels
 
 STEP = 0.5  # mm between the wall's samples along a path
-ROUTES = ("moment", "straight", "depth")  # routing preferences tried in turn
+ROUTES = ("moment", "straight", "depth", "direct")  # routing preferences tried in turn
 TIP_MAX = 20.0  # mm: a straight run past the anchor longer than this turns to a shorter exit
 
 
@@ -36,7 +36,7 @@ def _pocket(d: np.ndarray, tip: np.ndarray, radius: float, top: float, bottom: f
     """A cylinder of ``radius`` on the axis through ``tip`` along the outward ``d``, from
     ``bottom`` below the surface up to ``top`` (negative: below it too)."""
     c = m3.Manifold.cylinder(bottom - top, radius, radius, 32)
-    return _along(c, d).translate(list(tip - d * bottom))
+    return along_axis(c, d).translate(list(tip - d * bottom))
 
 
 def _pocket_fits(finger, tip: np.ndarray, d: np.ndarray, radius: float, depth: float,
@@ -91,28 +91,36 @@ def tip_exit(finger, before: np.ndarray, anchor: np.ndarray, cfg: ExportConfig,
 
 def plan(vox: Voxels, depth: np.ndarray, regions: dict, finger, cfg: ExportConfig,
          finger_name: str, top_mm: float, root_mm: float, side_sign: dict[int, float],
-         prefer: str = "moment", central: bool = False) -> list[Tendon]:
-    """The tendons of one finger for one routing preference (no wall check yet)."""
+         prefer: str = "moment") -> list[Tendon]:
+    """The tendons of one finger for one routing preference (no wall check yet). ``direct``
+    takes the deepest route's anchor and runs straight to it from the root face, the routing
+    points spread over the run's second half (no bend between them)."""
     need = cfg.radius + cfg.min_wall + 0.5 * vox.pitch  # half a voxel of margin for the fillets
-    routes = routing_points(vox, depth, regions, need, side_sign, prefer)
-    out, entries = [], []
+    routes = routing_points(vox, depth, regions, need, side_sign,
+                            "depth" if prefer == "direct" else prefer,
+                            sep=2 * cfg.radius + cfg.min_wall + vox.pitch)
+    out, entries, runs = [], [], []
+    sep = 2 * cfg.radius + cfg.min_wall + 0.5
     for g, (pts, depths, ok) in routes.items():
-        first = pts[0] if not central else np.array([np.inf, 0.0, np.inf])
-        x, z = root_entry(vox, root_mm, pts[0] if not central else first, need, entries,
-                          2 * cfg.radius + cfg.min_wall + 0.5)
-        if central:  # the point of the root with the most material around it
-            x, z = root_entry(vox, root_mm, pts[0], 10 * need, entries,
-                              2 * cfg.radius + cfg.min_wall + 0.5)
+        target = pts[-1] if prefer == "direct" else pts[0]
+        x, z = root_entry(vox, depth, root_mm, target, need, entries, sep, runs)
         entries.append((x, z))
-        tip, normal, pocket = tip_exit(finger, pts[-2], pts[-1], cfg, side_sign[g])
-        role = ROLES.get(g, f"group {g}")
-        t = Tendon(finger_name, f"{finger_name}-{ROLES.get(g, f'group{g}')}", role, int(g),
-                   pts.round(3).tolist(), pts[-1].round(3).tolist(), [round(x, 3), top_mm,
-                                                                      round(z, 3)],
+        entry = np.array([x, root_mm, z])
+        runs.append((entry, np.asarray(target, float)))
+        if prefer == "direct":
+            pts = entry + np.array([0.55, 0.7, 0.85, 1.0])[:, None] * (pts[-1] - entry)
+            depths = vox.depth_at(pts, depth).tolist()
+            ok = bool(min(depths) >= need - 0.5 * vox.pitch)
+            before = entry
+        else:
+            before = pts[-2]
+        tip, normal, pocket = tip_exit(finger, before, pts[-1], cfg, side_sign[g])
+        t = Tendon(finger_name, f"{finger_name}-{ROLES.get(g, f'group{g}')}",
+                   ROLES.get(g, f"group {g}"), int(g), pts.round(3).tolist(),
+                   pts[-1].round(3).tolist(), [round(x, 3), top_mm, round(z, 3)],
                    entry=[round(x, 3), root_mm, round(z, 3)], tip=tip.round(3).tolist(),
                    tip_normal=normal.round(4).tolist(), pocket_mm=pocket,
-                   depth_mm=[round(v, 3) for v in depths], route=prefer + (
-                       ", central entry" if central else ""), ok=ok)
+                   depth_mm=[round(v, 3) for v in depths], route=prefer, ok=ok)
         out.append(t)
     return out
 
@@ -169,12 +177,11 @@ def route_finger(finger, regions: dict, cfg: ExportConfig, finger_name: str, top
     """Plan, check and, where the wall is too thin, re-route the tendons of one finger."""
     vox = voxels or Voxels.of(finger, cfg.pitch)
     depth = vox.depth()
-    variants = [(p, False) for p in ROUTES] + [("depth", True)]
     best: dict[int, Tendon] = {}
     current: list[Tendon] = []
-    for prefer, central in variants:
+    for prefer in ROUTES:
         trial = plan(vox, depth, regions, finger, cfg, finger_name, top_mm, root_mm, side_sign,
-                     prefer, central)
+                     prefer)
         # keep the tendons that already pass; try the new route for the others
         mixed = [best[t.group] if t.group in best and best[t.group].ok else t for t in trial]
         check(mixed, finger, cfg, root_mm, pockets)
@@ -234,7 +241,7 @@ def base_cut(t: Tendon, cfg: ExportConfig, top_mm: float, root_mm: float):
     return line + seat
 
 
-def _along(solid, d: np.ndarray):
+def along_axis(solid, d: np.ndarray):
     """Turn a solid built along +z so that +z points along ``d``."""
     z = np.array([0.0, 0.0, 1.0])
     axis = np.cross(z, d)

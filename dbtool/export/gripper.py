@@ -68,6 +68,14 @@ def _pillar_fill(design: Design, scale: float, boxes: np.ndarray | None, top: fl
     return len(filled - active) * cell**3
 
 
+def _near_root(t, cfg: ExportConfig, root: float, depth: float) -> np.ndarray:
+    """Points (every 0.25 mm) of ``t``'s centreline within ``depth`` below the root face."""
+    from dbtool.export.channel_path import fillet
+
+    path = fillet(t.corners(), cfg.bend_radius).sample(0.25)
+    return path[(path[:, 1] <= root + 1e-6) & (path[:, 1] >= root - depth)]
+
+
 def _union(solids: list):
     solids = [s for s in solids if s is not None and not s.is_empty()]
     return m3.Manifold.batch_boolean(solids, m3.OpType.Add) if solids else m3.Manifold()
@@ -93,9 +101,10 @@ def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
     t_mesh = time.perf_counter()
     vox = Voxels.of(finger, cfg.pitch)
     tendons = route_finger(finger, regions, cfg, "finger", top, root, SIDES, voxels=vox)
-    # alignment pins in the root face, clear of the channels' entries; the walls are measured
-    # again with their pockets cut
-    avoid = [(t.entry[0], t.entry[2], cfg.radius) for t in tendons]
+    # alignment pins in the root face, clear of the channels where they run within a pocket's
+    # depth (and a wall) of it; the walls are measured again with the pockets cut
+    avoid = [(x, z, cfg.radius) for t in tendons
+             for x, _, z in _near_root(t, cfg, root, cfg.pin_length + 0.5 + cfg.min_wall)]
     pins = alignment_pins(finger, root, cfg.pin_diameter, cfg.pin_clearance, cfg.min_wall, avoid)
     pin_base, pockets = pin_solids(pins, root, cfg.pin_diameter, cfg.pin_length,
                                    cfg.pin_clearance)

@@ -71,14 +71,17 @@ class Tendon:
 
 def routing_points(vox: Voxels, depth: np.ndarray, region_fields: dict[int, OccupancyField],
                    need: float, side_sign: dict[int, float], prefer: str = "moment",
-                   n_points: int = 4) -> dict[int, tuple[np.ndarray, list[float], bool]]:
+                   n_points: int = 4, sep: float = 0.0
+                   ) -> dict[int, tuple[np.ndarray, list[float], bool]]:
     """Per actuator group: ``n_points`` routing points (root to tip), their depths, and whether
-    every point has ``need`` (channel radius + wall) of material around it."""
+    every point has ``need`` (channel radius + wall) of material around it; a point stays
+    ``sep`` from the earlier groups' points of its slab (two channels and the wall between)."""
     pitch = vox.pitch
     idx = np.argwhere(vox.inside)
     centres = vox.origin + idx * pitch
     d = depth[vox.inside]
     out = {}
+    taken: dict[int, list[np.ndarray]] = {}
     for g, f in sorted(region_fields.items()):
         others = [o for k, o in region_fields.items() if k != g]
         own = f.sample(centres)
@@ -97,6 +100,10 @@ def routing_points(vox: Voxels, depth: np.ndarray, region_fields: dict[int, Occu
             if not slab.any():
                 slab = np.abs(c[:, 1] - mid) == np.abs(c[:, 1] - mid).min()
             cs, ds = c[slab], dr[slab]
+            for q in taken.get(j, []):
+                apart = np.linalg.norm(cs - q, axis=1) >= sep
+                if apart.any():
+                    cs, ds = cs[apart], ds[apart]
             good = ds >= need
             if not good.any():
                 ok = False
@@ -114,6 +121,7 @@ def routing_points(vox: Voxels, depth: np.ndarray, region_fields: dict[int, Occu
             k = np.flatnonzero(near)[np.argmin(((cs[near][:, [0, 2]] - ref) ** 2).sum(1))]
             pts.append(cs[k])
             depths.append(float(ds[k]))
+            taken.setdefault(j, []).append(cs[k])
         out[int(g)] = (np.array(pts), depths, ok)
     return out
 
@@ -131,11 +139,14 @@ def _segment_depth(vox: Voxels, depth: np.ndarray, a: np.ndarray, ends: np.ndarr
     return np.concatenate(out) if out else np.zeros(0)
 
 
-def root_entry(vox: Voxels, root_mm: float, first: np.ndarray, need: float,
-               avoid: list | tuple = (), sep: float = 0.0) -> tuple[float, float]:
-    """Where the tendon enters the finger's root face: the point of the root cross-section with
-    ``need`` of material around it (2-D distance) nearest to the first routing point and at
-    least ``sep`` from every (x, z) in ``avoid`` (the other tendons' entries)."""
+def root_entry(vox: Voxels, depth: np.ndarray, root_mm: float, first: np.ndarray, need: float,
+               avoid: list | tuple = (), sep: float = 0.0, runs: list | tuple = ()
+               ) -> tuple[float, float]:
+    """Where the tendon enters the finger's root face: a point of the root cross-section with
+    ``need`` of material around it (2-D distance), at least ``sep`` from every (x, z) in
+    ``avoid`` (the other tendons' entries), whose straight run to ``first`` (the first routing
+    point) keeps ``need`` too and stays ``sep`` from the other tendons' ``runs`` ((a, b)
+    segments); the nearest such point, or the one whose run keeps the most."""
     from scipy.ndimage import distance_transform_edt
 
     j = int(np.floor((root_mm - vox.origin[1]) / vox.pitch - 0.5))  # the layer below the face
@@ -151,7 +162,18 @@ def root_entry(vox: Voxels, root_mm: float, first: np.ndarray, need: float,
     for a in avoid:
         far = np.hypot(xz[:, 0] - a[0], xz[:, 1] - a[1]) >= sep
         xz = xz[far] if far.any() else xz
-    k = np.argmin(((xz - first[[0, 2]]) ** 2).sum(1))
+    ends = np.column_stack([xz[:, 0], np.full(len(xz), vox.origin[1] + j * vox.pitch), xz[:, 1]])
+    f = np.linspace(0.0, 1.0, 12)[None, :, None]
+    mine = np.asarray(first, float)[None, None] + f * (ends[:, None] - np.asarray(first, float))
+    for a, b in runs:  # keep clear of the runs already taken (no crossing channels)
+        theirs = np.asarray(a) + np.linspace(0.0, 1.0, 24)[:, None] * (np.asarray(b) - a)
+        gap = np.linalg.norm(mine[:, :, None] - theirs[None, None], axis=-1).min((1, 2))
+        if (gap >= sep).any():
+            xz, ends, mine = xz[gap >= sep], ends[gap >= sep], mine[gap >= sep]
+    run = _segment_depth(vox, depth, np.asarray(first, float), ends, vox.pitch)
+    near = ((xz - np.asarray(first)[[0, 2]]) ** 2).sum(1)
+    fits = run >= need - 0.5 * vox.pitch
+    k = np.flatnonzero(fits)[np.argmin(near[fits])] if fits.any() else int(np.argmax(run))
     return float(xz[k, 0]), float(xz[k, 1])
 
 

@@ -1,0 +1,137 @@
+"""The gripper export as a maker builds it (docs/export.md): mounting holes clear of the fingers,
+alignment pins, channels sized for line and tube with round bends and the wall kept along the
+whole path, through-holes and knot pockets at the fingertips, parts in their print orientation,
+3MF materials, PrusaSlicer's verdict and the assembly sheet; and checks that can fail."""
+
+import json
+import math
+import shutil
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dbtool.design import Design
+from dbtool.export.assembly import ExportConfig, build, export_design
+from dbtool.export.channel_path import fillet
+from dbtool.export.slicer import find_slicer
+from dbtool.export.verify import verify_export
+
+REFERENCE = Path(__file__).resolve().parents[1] / "exports" / "gripping-seed0"
+SLICER = find_slicer()
+
+
+@pytest.fixture(scope="module")
+def made(tmp_path_factory):
+    out = tmp_path_factory.mktemp("maker") / "ref"
+    rep = export_design(Design.load(REFERENCE / "design.npz"), out, ExportConfig())
+    return out, rep
+
+
+def test_every_maker_check_passes_on_the_reference(made):
+    out, rep = made
+    v = verify_export(out, slice_flex=SLICER is not None)
+    assert v["ok"], v
+    assert v["holes"]["count"] == 4 and v["holes"]["clear"]
+    assert len(v["tendons"]) == 4
+    assert all(t["through_hole"] and t["pocket_mm"] >= 2.0 for t in v["tendons"])
+    assert rep["tendons"]["channel_clearance_mm"] >= rep["config"]["min_wall"]
+    assert rep["tendons"]["wall_samples"] > 100  # every 0.5 mm along four paths
+    assert len(rep["mounting"]["pins"]) == 2
+    # the base lies flat, pins up; every part rests on the bed
+    assert abs(rep["parts"]["base"]["print_pose"]["down"][1]) == pytest.approx(1.0)
+    assert v["parts"]["base"]["height_mm"] == pytest.approx(7.5 + 3.0, abs=1e-3)
+
+
+def test_print_pose_is_the_least_overhang_of_its_candidates(made):
+    _, rep = made
+    for name in ("finger", "finger_mirror", "base"):
+        pose = rep["parts"][name]["print_pose"]
+        least = min(c["overhang_mm2"] for c in pose["candidates"])
+        assert pose["overhang_mm2"] <= least + max(0.01 * least, 1.0)
+
+
+def test_3mf_carries_a_material_per_part_on_one_plate(made):
+    out, _ = made
+    with zipfile.ZipFile(out / "assembly.3mf") as z:
+        model = z.read("3D/3dmodel.model").decode()
+    assert "<basematerials" in model and "TPU 95A (soft)" in model and "PLA (rigid)" in model
+    assert model.count("pid=") == 3 and model.count("transform=") == 3
+
+
+@pytest.mark.skipif(SLICER is None, reason="PrusaSlicer not installed: apt-get install "
+                    "prusa-slicer")
+def test_the_slicer_slices_every_part_clean_and_the_report_records_it(made):
+    out, rep = made
+    for name in ("finger", "finger_mirror", "base"):
+        s = rep["slicer"][name]
+        assert s["ok"] and s["messages"] == [], s
+        assert s["layers"] > 10 and s["print_time_s"] > 60 and s["filament_g"] > 1, s
+    assert rep["slicer"]["finger"]["material"] == "flex"
+    assert rep["slicer"]["base"]["material"] == "pla"
+    assert "PrusaSlicer, 0.2 mm layers" in (out / "report.md").read_text()
+
+
+def _copy(made, tmp_path) -> Path:
+    dst = tmp_path / "copy"
+    shutil.copytree(made[0], dst)
+    return dst
+
+
+def test_the_wall_check_fails_when_the_wall_asked_for_is_thicker(made, tmp_path):
+    """verify_export measures the wall itself: ask for more than the paths keep and it fails."""
+    dst = _copy(made, tmp_path)
+    tj = json.loads((dst / "tendons.json").read_text())
+    kept = min(t["clearance_mm"] for t in tj["tendons"])
+    tj["min_wall_mm"] = kept + 0.5
+    (dst / "tendons.json").write_text(json.dumps(tj))
+    v = verify_export(dst)
+    assert not v["ok"] and not all(t["wall_ok"] for t in v["tendons"])
+
+
+def test_the_hole_check_fails_on_the_old_corner_holes(made, tmp_path):
+    """The holes 8 mm from the plate's corners (before) lay under the finger roots."""
+    dst = _copy(made, tmp_path)
+    rep = json.loads((dst / "report.json").read_text())
+    rep["mounting"]["holes"] = [[x, z] for x in (8.0, 52.0) for z in (8.0, 112.0)]
+    (dst / "report.json").write_text(json.dumps(rep))
+    v = verify_export(dst)
+    assert not v["holes"]["clear"] and max(v["holes"]["covered_mm3"]) > 10.0
+
+
+def test_channels_take_the_line_and_tube_sizes_and_round_their_bends(made):
+    out, _ = made
+    tj = json.loads((out / "tendons.json").read_text())
+    assert tj["channel_diameter_mm"] == pytest.approx(0.5 + 0.4)  # braided line + clearance
+    assert tj["tube_seat_diameter_mm"] == pytest.approx(2.0 + 0.4)  # PTFE tube + clearance
+    for t in tj["tendons"]:
+        corners = np.array([t["exit"], t["entry"], *t["points"], t["tip"]])
+        radii = fillet(corners, tj["bend_radius_mm"]).radii
+        assert np.all(radii[np.isfinite(radii)] >= tj["bend_radius_mm"] - 1e-9)
+        assert t["ok"] and t["length_mm"] > 30
+    cfg = ExportConfig(tendon_diameter=1.0, clearance=0.5, tube_diameter=3.0)
+    assert (cfg.line_channel, 2 * cfg.seat_radius) == (1.5, 3.5)
+    with pytest.raises(ValueError, match="bend-radius"):
+        ExportConfig(bend_radius=0.0)
+
+
+def test_a_wall_no_route_can_keep_is_reported_as_failing():
+    asm = build(Design.load(REFERENCE / "design.npz"), ExportConfig(min_wall=6.0, slice=False))
+    assert not all(t.ok for t in asm.tendons)
+    bad = [t for t in asm.tendons if not t.ok]
+    assert all(any("wall" in f for f in t.failures) for t in bad)
+    assert all(t.clearance_mm < 6.0 for t in bad)
+
+
+def test_the_assembly_sheet_lists_parts_steps_and_line_lengths(made):
+    out, rep = made
+    md = (out / "assembly.md").read_text()
+    for word in ("M3", "PTFE", "glue", "knot", "TPU 95A (soft)", "PLA (rigid)"):
+        assert word.lower() in md.lower(), word
+    tube = rep["config"]["tube_length"]
+    total = sum(t["length_mm"] + tube + 150.0 for t in json.loads(
+        (out / "tendons.json").read_text())["tendons"])
+    assert f"{int(math.ceil(total / 10.0) * 10)}" in md
+    assert "WARNING" not in md
+    assert (out / "exploded.png").stat().st_size > 20_000
