@@ -6,11 +6,11 @@ into the base) straight down to the finger's root face, through the four routing
 knot sits in a pocket. Every corner is rounded to at least the bend radius
 (:func:`dbtool.export.channel_path.fillet`). The wall is measured exactly along the whole path
 inside the finger, every 0.5 mm: the distance from the centreline to the surface of the finger
-with everything else cut from it (the other channels, the pin pockets; not the glued root face),
-less the channel's radius. A path that keeps less than the minimum is re-routed (the deepest
-straightest run within 2.5 mm of the largest moment arm, then the deepest routing points, then a
-straight run from the root face to the deepest route's anchor); if no route keeps
-it, the tendon is reported as failing with where and by how much.
+with everything else cut from it (the other channels, the pin pockets; of the glued root face,
+all but the channel's own mouth), less the channel's radius. A path that keeps less than the
+minimum is re-routed (the straightest run within 2.5 mm of the largest moment arm, then the
+deepest routing points, then a straight run from the root face to the deepest route's anchor);
+if no route keeps it, the tendon is reported as failing with where and by how much.
 """
 
 from __future__ import annotations
@@ -115,10 +115,17 @@ def plan(vox: Voxels, depth: np.ndarray, regions: dict, finger, cfg: ExportConfi
         else:
             before = pts[-2]
         tip, normal, pocket = tip_exit(finger, before, pts[-1], cfg, side_sign[g])
+        # the channel goes straight down through the glued root face and bends only below it,
+        # so that it leaves the face square with its wall all round
+        turn = np.arccos(np.clip(-_unit(pts[0] - entry)[1], -1.0, 1.0))
+        drop = min(cfg.bend_radius * np.tan(turn / 2) + cfg.radius + cfg.min_wall,
+                   0.5 * (root_mm - pts[0][1]))
+        lead = (entry - [0.0, drop, 0.0]).round(3).tolist() if turn > np.radians(1) else []
         t = Tendon(finger_name, f"{finger_name}-{ROLES.get(g, f'group{g}')}",
                    ROLES.get(g, f"group {g}"), int(g), pts.round(3).tolist(),
                    pts[-1].round(3).tolist(), [round(x, 3), top_mm, round(z, 3)],
-                   entry=[round(x, 3), root_mm, round(z, 3)], tip=tip.round(3).tolist(),
+                   entry=[round(x, 3), root_mm, round(z, 3)], lead=lead,
+                   tip=tip.round(3).tolist(),
                    tip_normal=normal.round(4).tolist(), pocket_mm=pocket,
                    depth_mm=[round(v, 3) for v in depths], route=prefer, ok=ok)
         out.append(t)
@@ -129,6 +136,15 @@ def _root_face(root_mm: float):
     def exclude(centroids: np.ndarray, normals: np.ndarray) -> np.ndarray:
         return (np.abs(centroids[:, 1] - root_mm) < 1e-3) & (normals[:, 1] > 0.99)
     return exclude
+
+
+def _to_glue_face(pts: np.ndarray, root_mm: float, entry: list, mouth: float) -> np.ndarray:
+    """Distance (mm) from points inside the finger to its glued root face (y = ``root_mm``,
+    taken to cover the finger's section) outside the channel's mouth, the disk of radius
+    ``mouth`` around the entry where the channel goes through the face on purpose."""
+    h = root_mm - pts[:, 1]
+    rho = np.hypot(pts[:, 0] - entry[0], pts[:, 2] - entry[2])
+    return np.where(rho >= mouth, h, np.hypot(h, mouth - rho))
 
 
 def check(tendons: list[Tendon], finger, cfg: ExportConfig, root_mm: float,
@@ -150,7 +166,10 @@ def check(tendons: list[Tendon], finger, cfg: ExportConfig, root_mm: float,
         inside = np.arange(len(samples)) <= k_anchor
         inside &= samples[:, 1] <= root_mm - 1e-6
         pts = samples[inside]
+        # the glued root face counts as surface too, but for the channel's own mouth
+        mouth = cfg.radius + cfg.min_wall + 1.0
         wall = wall_along(pts, SurfaceDistance(solid, exclude=_root_face(root_mm)), cfg.radius)
+        wall = np.minimum(wall, _to_glue_face(pts, root_mm, t.entry, mouth) - cfg.radius)
         finite = path.radii[np.isfinite(path.radii)]
         t.bend_radii_mm = [round(float(r), 3) for r in finite]
         t.min_bend_radius_mm = round(float(finite.min()), 3) if len(finite) else None

@@ -42,6 +42,7 @@ class Tendon:
     anchor: list[float]  # the tip-most routing point; the line runs on to the knot pocket
     exit: list[float]  # where the line (in its tube) leaves the top of the base
     entry: list[float] = field(default_factory=list)  # where it enters the finger's root face
+    lead: list[float] = field(default_factory=list)  # straight down to here, then the first bend
     tip: list[float] = field(default_factory=list)  # the through-hole's mouth: the knot pocket
     tip_normal: list[float] = field(default_factory=list)  # the surface's outward normal there
     pocket_mm: float = 0.0  # diameter of the knot pocket at the tip (0: the knot sits outside)
@@ -56,9 +57,10 @@ class Tendon:
     ok: bool = True  # wall and bends as required along the whole path
 
     def corners(self) -> np.ndarray:
-        """The centreline's corners (mm): exit, root entry, routing points, knot pocket."""
-        pts = [self.exit, *([self.entry] if self.entry else []), *self.points,
-               *([self.tip] if self.tip else [])]
+        """The centreline's corners (mm): exit, the end of the straight run down through the
+        root face (the entry lies on it), routing points, knot pocket."""
+        down = [self.lead] if self.lead else [self.entry] if self.entry else []
+        pts = [self.exit, *down, *self.points, *([self.tip] if self.tip else [])]
         return np.array(pts, float)
 
     def path(self) -> np.ndarray:
@@ -185,7 +187,8 @@ def mirror_tendon(t: Tendon, plane_z: float, finger_name: str) -> Tendon:
 
     return replace(t, finger=finger_name, name=t.name.replace(t.finger, finger_name),
                    points=[ref(p) for p in t.points], anchor=ref(t.anchor), exit=ref(t.exit),
-                   entry=ref(t.entry), tip=ref(t.tip), depth_mm=list(t.depth_mm),
+                   entry=ref(t.entry), lead=ref(t.lead), tip=ref(t.tip),
+                   depth_mm=list(t.depth_mm),
                    tip_normal=[t.tip_normal[0], t.tip_normal[1], -t.tip_normal[2]]
                    if t.tip_normal else [],
                    bend_radii_mm=list(t.bend_radii_mm), failures=list(t.failures))

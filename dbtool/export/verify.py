@@ -11,7 +11,7 @@ own rather than the exporter's measurements:
   hole's axis holds no finger material;
 - the wall along every channel: a tube of radius channel radius + minimum wall (less 0.05 mm)
   around the centreline inside the finger (root face to anchor) lies within the finger with its
-  own channel filled;
+  own channel filled (only at the channel's mouth may it cross the glued root face);
 - every tendon ends in a through-hole at the fingertip (a probe just inside the mouth finds no
   material) and, where the report says so, in a knot pocket;
 - optionally, PrusaSlicer slices every part clean with the flexible-filament profile.
@@ -69,7 +69,8 @@ def _empty(solid, at: np.ndarray) -> bool:
 def tendon_wall(finger, t: dict, tj: dict, root: float) -> dict:
     """Does a tube of channel radius + wall around ``t``'s path inside the finger stay in it?"""
     r, wall = 0.5 * tj["channel_diameter_mm"], tj["min_wall_mm"]
-    corners = np.array([t["exit"], t["entry"], *t["points"], t["tip"]], float)
+    down = t.get("lead") or t["entry"]
+    corners = np.array([t["exit"], down, *t["points"], t["tip"]], float)
     path = fillet(corners, tj["bend_radius_mm"])
     line = path.as_polyline(step=0.5)
     k = int(np.argmin(np.linalg.norm(line - np.array(t["anchor"]), axis=1)))
@@ -83,8 +84,13 @@ def tendon_wall(finger, t: dict, tj: dict, root: float) -> dict:
         depth = tj["knot_depth_mm"]
         cyl = m3.Manifold.cylinder(depth + 1.02, 0.5 * pocket + 0.02, 0.5 * pocket + 0.02, 48)
         own = own + along_axis(cyl, n).translate(list(np.array(t["tip"]) - n * (depth + 0.02)))
-    thick = _capsules(inner, r + wall - WALL_SLACK).trim_by_plane([0.0, -1.0, 0.0], -root)
-    outside = (thick - (finger + own)).volume()
+    # the channel goes through the glued root face at its mouth (channel radius + wall + 1 mm
+    # around the entry); elsewhere the root face is surface like any other
+    mouth = r + wall + 1.0
+    gate = m3.Manifold.cylinder(10.0, mouth, mouth, 64).rotate([-90.0, 0.0, 0.0])
+    gate = gate.translate([t["entry"][0], root, t["entry"][2]])
+    thick = _capsules(inner, r + wall - WALL_SLACK).trim_by_plane([0.0, -1.0, 0.0], -root - 5.0)
+    outside = (thick - (finger + own + gate)).volume()
     mouth = np.array(t["tip"]) - 0.3 * n
     side = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
     side /= np.linalg.norm(side)
