@@ -22,6 +22,8 @@ from dbtool.realgap.run import open_bench, replay, simulate
 REF = Path(__file__).resolve().parents[1] / "exports" / "gripping-seed0"
 RETURN_TOL_MM = 0.5  # release back to 0 ends this close to the start (measured 0.28)
 REST_TOL_MM = 0.5  # simulated rest vs the exported meshes' fingertips (measured 0.15)
+# the calibration tests' protocol: pull the flexion tendon 5 mm and release it
+PULL_5MM = {"flexion": standard_schedule(5.0, 5.0)["flexion"]}
 
 
 @pytest.fixture(scope="module")
@@ -74,8 +76,10 @@ def test_rest_tip_distance_matches_the_exported_fingertips(standard):
 
 
 def test_replaying_a_simulated_log_against_its_own_design_is_exact(tmp_path):
+    """Both tendons (their order matters: the finger carries over from one to the next), one
+    5 mm pull and its release each: 7 holds of 40 steps per simulation."""
     params = TendonParams(gain=1.2, friction_mm=0.5)
-    simulate(REF, params, tmp_path / "sim.csv", step_mm=5.0, max_mm=10.0)
+    simulate(REF, params, tmp_path / "sim.csv", step_mm=5.0, max_mm=5.0)
     logged = read_log(tmp_path / "sim.csv")
     assert logged.meta["source"] == "sim" and logged.meta["design"] == "gripping-seed0"
     report, out = replay(tmp_path / "sim.csv", REF, params, tmp_path / "same")
@@ -86,12 +90,14 @@ def test_replaying_a_simulated_log_against_its_own_design_is_exact(tmp_path):
         assert (out / name).stat().st_size > 0
     other, _ = replay(tmp_path / "sim.csv", REF, TendonParams(), tmp_path / "other")
     print("default parameters against gain 1.2, friction 0.5:", other["overall"]["rmse_mm"])
-    assert other["overall"]["rmse_mm"] > 0.05
+    assert other["overall"]["rmse_mm"] > 0.05  # measured 0.16
 
 
 def test_calibration_recovers_a_hidden_gain(bench):
+    """One 5 mm pull of the flexion tendon and its release (4 holds of 40 steps, settled):
+    measured gain 1.3000, RMSE 0.276 -> 0.0000 mm in 3 evaluations."""
     b, meta = bench
-    schedule = {"flexion": standard_schedule(5.0, 10.0)["flexion"]}
+    schedule = PULL_5MM
     hidden = TendonParams(gain=1.3)
     log = simulate_log(b, schedule, hidden, meta, hold=40)
     cal = calibrate(b, log, TendonParams(), names=("gain",), max_evals=8, hold=40)
@@ -103,9 +109,13 @@ def test_calibration_recovers_a_hidden_gain(bench):
 
 def test_calibration_gradient_matches_central_differences(bench):
     """The adjoint gradient of the protocol's loss (readings seeded along the episode) against
-    central differences of the simulated protocol, for the three fitted parameters."""
+    central differences of the simulated protocol, for the three fitted parameters. The 5 mm
+    pull and release of the flexion tendon: a reversal (friction's play acts), readings seeded
+    at two checkpoints and the final state, each hold of 40 steps settled (holds of 20 leave
+    the readings unsettled, and the stiffness gradient's error rose to 7.5e-3 here and 1.3e-2
+    with 5 mm steps to 10 mm)."""
     b, meta = bench
-    schedule = {"flexion": standard_schedule(5.0, 10.0)["flexion"]}
+    schedule = PULL_5MM
     log = simulate_log(b, schedule, TendonParams(gain=1.3, stiffness_scale=0.7,
                                                  friction_mm=0.5), meta, hold=40)
     p = TendonParams(friction_mm=0.3)
@@ -119,4 +129,4 @@ def test_calibration_gradient_matches_central_differences(bench):
         fd = (lp - lm) / (2 * eps)
         rel = abs(fd - grad[j]) / abs(fd)
         print(f"d loss / d {name}: fd {fd:.6g}, adjoint {grad[j]:.6g}, rel. err {rel:.2e}")
-        assert rel < 0.01  # measured 1.4e-3 (gain), 1.6e-3 (stiffness), 1.5e-3 (friction)
+        assert rel < 0.01  # measured 1.2e-3 (gain), 1.2e-3 (stiffness), 1.7e-4 (friction)
