@@ -27,7 +27,7 @@ STEP = 0.5  # mm between the wall's samples along a path
 ROUTES = ("moment", "straight", "depth", "direct")  # routing preferences tried in turn
 TIP_MAX = 20.0  # mm: a straight run past the anchor longer than this turns to a shorter exit
 SEAT_WALL = 0.4  # mm of the base between two tube seats, at least
-LEAD = 0.5  # share of the first bend's tangent run kept straight below the root face
+LEAD = 1.0  # share of the first bend's tangent run kept straight below the root face
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

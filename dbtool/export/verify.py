@@ -12,6 +12,7 @@ own rather than the exporter's measurements:
 - the wall along every channel: a tube of radius channel radius + minimum wall (less 0.05 mm)
   around the centreline inside the finger (root face to anchor) lies within the finger with its
   own channel filled (only at the channel's mouth may it cross the glued root face);
+- every bend of every channel's centreline has at least the bend radius;
 - every tendon ends in a through-hole at the fingertip (a probe just inside the mouth finds no
   material) and, where the report says so, in a knot pocket;
 - optionally, PrusaSlicer slices every part clean with the flexible-filament profile.
@@ -72,6 +73,8 @@ def tendon_wall(finger, t: dict, tj: dict, root: float) -> dict:
     down = t.get("lead") or t["entry"]
     corners = np.array([t["exit"], down, *t["points"], t["tip"]], float)
     path = fillet(corners, tj["bend_radius_mm"])
+    radii = path.radii[np.isfinite(path.radii)]
+    bend_ok = bool(np.all(radii >= tj["bend_radius_mm"] - 1e-6))
     line = path.as_polyline(step=0.5)
     k = int(np.argmin(np.linalg.norm(line - np.array(t["anchor"]), axis=1)))
     inner = line[: k + 1]
@@ -96,7 +99,9 @@ def tendon_wall(finger, t: dict, tj: dict, root: float) -> dict:
     side /= np.linalg.norm(side)
     in_pocket = np.array(t["tip"]) - 1.0 * n + 0.35 * pocket * side
     return {"name": t["name"], "outside_mm3": round(float(outside), 4),
-            "wall_ok": bool(outside < 1e-3), "through_hole": _empty(finger, mouth),
+            "wall_ok": bool(outside < 1e-3), "bend_ok": bend_ok,
+            "min_bend_mm": round(float(radii.min()), 3) if len(radii) else None,
+            "through_hole": _empty(finger, mouth),
             "pocket_mm": pocket, "pocket_open": bool(pocket == 0 or _empty(finger, in_pocket))}
 
 
@@ -132,7 +137,8 @@ def verify_export(folder: Path, slice_flex: bool = False) -> dict:
     out["ok"] = bool(
         all(p["watertight"] and p["bodies"] == 1 for p in out["parts"].values())
         and out["holes"]["clear"] and out["oriented"] and out["base_flat"]
-        and all(t["wall_ok"] and t["through_hole"] and t["pocket_open"] for t in out["tendons"])
+        and all(t["wall_ok"] and t["bend_ok"] and t["through_hole"] and t["pocket_open"]
+                for t in out["tendons"])
         and all(out["slicer"].values())
         and all(v["ok"] for v in out.get("slicer_flex", {}).values()))
     return out
