@@ -3,13 +3,14 @@
 import json
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import torch
 
 from dbtool.codesign import design_run as run_mod
-from dbtool.codesign.config import CodesignConfig
+from dbtool.codesign.config import CodesignConfig, preset
 from dbtool.codesign.design_run import DesignRun, RunError, Settings
 from dbtool.codesign.langevin import clip_rms, codesign_sample, rms, stops
 from dbtool.design import Design
@@ -91,12 +92,21 @@ def _settings(**kw):
     return Settings(**base)
 
 
+def _small_preset(name: str, task: str):
+    """The preset at test size: epochs of 3 designs (the buffer trains from the first epoch),
+    16 sampler steps, co-design stops at t = 400, 200, 0."""
+    emb, cod = preset(name, task)
+    return (replace(emb, samples_per_epoch=3, min_buffer=3, top_k=2, batch_size=2,
+                    sample_steps=16), replace(cod, dt=200))
+
+
 class Interrupt(KeyboardInterrupt):
     pass
 
 
 def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp_path,
                                                                       monkeypatch):
+    monkeypatch.setattr(run_mod, "preset", _small_preset)  # for the runs and the resume
     a = DesignRun(tmp_path / "a", _settings(), prior)
     a.start("cpu")
     da = a.run(show_progress=False)
@@ -111,6 +121,8 @@ def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp
     assert (man["commit"], man["dirty"]) == tuple(git_commit().values())
     rows = [json.loads(line) for line in (tmp_path / "a" / "metrics.jsonl").open()]
     assert [r["epoch"] for r in rows if r["phase"] == "embedding"] == [0, 1]
+    # the checkpoint of epoch 0 holds a trained embedding and Adam state, which resume restores
+    assert all(r["loss"] is not None for r in rows if r["phase"] == "embedding")
     assert any(r["phase"] == "codesign" and "physics_rms" in r for r in rows)
     back = Design.load(tmp_path / "a" / "design.npz")
     assert back.surface.shape == (4096, 3) and back.task == "gripping"
