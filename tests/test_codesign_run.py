@@ -228,6 +228,20 @@ def test_quick_preset_keeps_the_paper_schedules_drift_and_controller_budgets():
         assert preset("paper", task)[1].step_scale == 1.0
 
 
+def test_settings_resize_the_embedding_epochs():
+    """``samples_per_epoch`` and ``sample_steps`` (the notebooks' quick mode) resize the
+    preset's epochs; the buffer keeps as many epochs as the preset's."""
+    for task, buffer in (("gripping", 4), ("hurdling", 40)):
+        quick = preset("quick", task)
+        emb, cod = Settings(task, samples_per_epoch=4, sample_steps=16).configs()
+        assert (emb.samples_per_epoch, emb.min_buffer, emb.top_k, emb.batch_size,
+                emb.sample_steps, emb.buffer_size) == (4, 4, 3, 4, 16, buffer)
+        assert replace(emb, samples_per_epoch=12, min_buffer=12, sample_steps=32,
+                       buffer_size=quick[0].buffer_size) == quick[0] and cod == quick[1]
+        assert Settings(task).configs() == quick
+    assert Settings("box", samples_per_epoch=2).configs()[0].top_k == 2
+
+
 def test_bandit_model_moves_the_mixture_onto_the_condition_that_performs():
     """The bandit replays measured metrics through the real Embedding, Buffer and
     mixture_step: with one condition far better than the rest, the epoch means rise."""

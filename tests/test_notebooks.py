@@ -34,7 +34,9 @@ QUICK_SETTINGS = {
         ("N_STEPS", 20, 100), ("settings('crawling').epochs", 2, 4),
         ("settings('crawling').samples_per_epoch", 4, 12),
         ("settings('crawling').sample_steps", 16, 32)],
-    "fig05_motion_montage": [("SIZES", {"epochs": 1, "samples": 1, "n_steps": 20}, {})],
+    "fig05_motion_montage": [
+        ("SIZES", {"epochs": 1, "samples_per_epoch": 4, "sample_steps": 16, "samples": 1,
+                   "n_steps": 10}, {}), ("UPSAMPLE", False, True)],
     "fig08_robotizing": [("len(FAMILIES)", 2, 3), ("STEPS", 10, 100), ("ITERS", 2, 5)],
     "fig11_diffusion_process": [("N", 1, 2), ("STEPS", 32, 64), ("len(US)", 4, 6)],
     "fig13_text_feedback": [

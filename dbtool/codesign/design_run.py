@@ -87,6 +87,8 @@ class Settings:
     gamma: float | None = None  # override Table 5's gamma
     n_steps: int = N_STEPS
     prompt_t_min: int = PROMPT_T_MIN  # the prompt guides the steps with t >= this (0: all)
+    samples_per_epoch: int | None = None  # designs per embedding epoch; None: the preset's
+    sample_steps: int | None = None  # sampler steps per design; None: the preset's
 
     def configs(self) -> tuple[EmbeddingConfig, CodesignConfig]:
         if self.preset not in PRESETS:
@@ -94,6 +96,13 @@ class Settings:
         emb, cod = preset(self.preset, self.task)
         if self.epochs is not None:
             emb = replace(emb, epochs=self.epochs)
+        if self.samples_per_epoch is not None:  # the buffer keeps as many epochs as before
+            s = self.samples_per_epoch
+            emb = replace(emb, samples_per_epoch=s, min_buffer=min(emb.min_buffer, s),
+                          buffer_size=s * max(1, emb.buffer_size // emb.samples_per_epoch),
+                          top_k=min(emb.top_k, s), batch_size=min(emb.batch_size, s))
+        if self.sample_steps is not None:
+            emb = replace(emb, sample_steps=self.sample_steps)
         if self.kappa is not None:
             cod = replace(cod, kappa=self.kappa)
         if self.gamma is not None:
