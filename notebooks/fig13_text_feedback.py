@@ -30,9 +30,8 @@
 # t >= `PROMPT_T_MIN` (350): it shapes the coarse body and leaves the rest to c and the physics
 # term (docs/codesign.md measures why). The condition c here is the null embedding (the start of
 # embedding optimisation), so the comparison isolates the prompt. Quick mode (`DBTOOL_QUICK=1`,
-# used in CI) uses 20-step episodes, 16 sampler steps and co-design stops at t = 200, 100, 0;
-# unset, 100-step episodes, 32 sampler steps and the quick preset's stops (400, 300, 200, 100,
-# 0).
+# used in CI) uses 10-step episodes, 16 sampler steps and co-design stops at t = 100, 0; unset,
+# 100-step episodes, 32 sampler steps and the quick preset's stops (400, 300, 200, 100, 0).
 
 # %%
 import os
@@ -51,7 +50,7 @@ from dbtool.sim.tasks import get_task
 from dbtool.viz.robot import robot_figure
 
 QUICK = os.environ.get("DBTOOL_QUICK", "0") == "1"
-N_STEPS, SAMPLE_STEPS = (20, 16) if QUICK else (100, 32)
+N_STEPS, SAMPLE_STEPS = (10, 16) if QUICK else (100, 32)
 PAIRS = [("balancing", "a ball", "ball"), ("crawling", "a star", "star"),
          ("hurdling", "a pair of wings", "wings"), ("box", "thick", None)]
 prior = Prior.load(with_upsampler=False)
@@ -70,7 +69,7 @@ for task_name, prompt, family in PAIRS:
     task = get_task(task_name)
     emb, cod = preset("quick", task_name)
     if QUICK:
-        cod = replace(cod, t_max=200)
+        cod = replace(cod, t_max=100)
     out = {}
     for label, conds in (("none", [(null, emb.guidance)]),
                          (prompt, [(null, emb.guidance),

@@ -40,7 +40,7 @@ QUICK_SETTINGS = {
     "fig08_robotizing": [("len(FAMILIES)", 2, 3), ("STEPS", 10, 100), ("ITERS", 2, 5)],
     "fig11_diffusion_process": [("N", 1, 2), ("STEPS", 32, 64), ("len(US)", 4, 6)],
     "fig13_text_feedback": [
-        ("N_STEPS", 20, 100), ("SAMPLE_STEPS", 16, 32), ("cod.t_max", 200, 400)],
+        ("N_STEPS", 10, 100), ("SAMPLE_STEPS", 16, 32), ("cod.t_max", 100, 400)],
     "fig14_fabrication": [("finger.bounding_box()[4] - finger.bounding_box()[1]", 20.0, 60.0)],
     "fig16_sim_vs_real": [("TENDONS", ("flexion",), ("flexion", "extension")),
                           ("FIT", ("gain", "friction_mm"),
