@@ -39,7 +39,7 @@ def test_renorm_caps_the_per_point_rms_and_keeps_direction():
 
 def test_codesign_sampler_logs_both_terms_and_co_optimises_the_controller(prior):
     task = get_task("crawling")
-    cfg = CodesignConfig(t_max=200, dt=100, K=1, gamma=0.01)
+    cfg = CodesignConfig(t_max=200, dt=100, K=1, gamma=0.01, search=())  # the fixed step
     rows = []
     c = prior.embed("a block")
     res = codesign_sample(prior, task, [(c, 3.0)], cfg, seed=0, steps=8, n_steps=STEPS,
@@ -60,7 +60,42 @@ def test_codesign_sampler_logs_both_terms_and_co_optimises_the_controller(prior)
                            kappa=0.0, gamma=0.01), seed=0, steps=8, n_steps=STEPS,
                            on_step=rows0.append)
     assert all("physics_rms" not in r for r in rows0)
+    assert res0.best is None
     assert np.allclose(res0.controller, task.controller(STEPS))
+
+
+def test_line_search_moves_along_the_gradient_and_hands_over_the_best_design(prior):
+    """The default step: at each stop the simulator scores x0_hat and the designs
+    ``x0_hat + a g / rms(g)`` of the line search; x_t moves by the best ``a`` (0 if none
+    beats x0_hat), and the best design the chain simulated is handed over when it beats the
+    final sample, with the stop that made it."""
+    from dbtool.codesign.design_run import codesign_design, source
+    from dbtool.sim import simulator
+
+    task = get_task("crawling")
+    c = prior.embed("a block")
+    cfg = CodesignConfig(t_max=200, dt=200, K=1, gamma=0.0, search=(0.02, 0.04))
+    rows = []
+    before = dict(simulator.EPISODES)
+    out = codesign_design(prior, task, [(c, 3.0)], cfg, seed=0, steps=8, n_steps=STEPS,
+                          on_step=rows.append)
+    assert simulator.EPISODES["backward"] - before["backward"] == 2  # one per stop
+    assert simulator.EPISODES["forward"] - before["forward"] == 2 + 2 * 2 + 1
+    assert [r["t"] for r in rows] == [200, 0]
+    evaluated = []
+    for r in rows:
+        assert len(r["search"]) == 2 and r["step"] in (0.0, 0.02, 0.04)
+        best = max([r["metric"], *r["search"]])
+        assert r["step"] == (0.0 if best == r["metric"] else
+                             cfg.search[r["search"].index(best)])
+        evaluated += [r["metric"], *r["search"]]
+    assert out["metric"] >= max(evaluated) - 1e-12
+    if out["stop"] is not None:
+        assert out["metric"] == pytest.approx(max(evaluated), abs=1e-12)
+        assert source(out) == f"co-design (stop t = {out['stop']})"
+    final = codesign_design(prior, task, [(c, 3.0)], replace(cfg, handover="final"), seed=0,
+                            steps=8, n_steps=STEPS)
+    assert final["stop"] is None and final["metric"] <= out["metric"]
 
 
 def test_min_move_lets_the_physics_term_act_at_t_zero(prior):
@@ -73,7 +108,8 @@ def test_min_move_lets_the_physics_term_act_at_t_zero(prior):
     for mm, smooth in ((0.0, False), (0.02, False), (0.02, True)):
         rows = []
         cfg = CodesignConfig(t_max=0, dt=100, K=1, kappa=1e9, gamma=0.0, min_move=mm,
-                             smooth=smooth)  # kappa: the renorm cap binds
+                             smooth=smooth, search=(),
+                             gradient="straight")  # kappa: the renorm cap binds
         res = codesign_sample(prior, task, [(c, 3.0)], cfg, seed=0, steps=8, n_steps=STEPS,
                               on_step=rows.append)
         assert [r["t"] for r in rows] == [0] and "physics_move" in rows[0], rows

@@ -57,3 +57,36 @@ def test_metric_gradient_wrt_cloud_matches_finite_differences(task_name):
         rel = abs(fd - an) / max(abs(fd), abs(an))
         print(f"{task_name}: fd {fd:.6e} analytic {an:.6e} relative error {rel:.2e}")
         assert np.sign(fd) == np.sign(an) and rel < TOL
+
+
+@pytest.mark.parametrize("task_name", ["crawling", "gripping"])
+def test_gradient_of_the_scored_robot_matches_finite_differences(task_name):
+    """``band=False``: the gradient of the thresholded robot (active sites only, mass
+    following their occupancy) is the exact derivative of the metric that is scored, wherever
+    no lattice site crosses the threshold; the straight-through gradient is not."""
+    from dbtool.robotize.cloud_metric import evaluate_full
+
+    task, x = get_task(task_name), small_cloud()
+    ev = evaluate_full(x, task, n_steps=STEPS, band=False)
+    st = evaluate_full(x, task, n_steps=STEPS)
+    assert ev.metric == pytest.approx(st.metric, rel=1e-9)
+    active = ev.robotized.robot.active()
+    rng = np.random.default_rng(2)
+    errors = {"scored": [], "straight-through": []}
+    for _ in range(6):
+        d = rng.standard_normal(x.shape)
+        d /= np.linalg.norm(d)
+        pair = [evaluate_full(x + s * EPS * d, task, need_grad=False, n_steps=STEPS)
+                for s in (1, -1)]
+        if not all(np.array_equal(p.robotized.robot.active(), active) for p in pair):
+            continue  # a site crossed the threshold: the metric jumps there
+        if len(errors["scored"]) == 2:
+            break
+        fd = (pair[0].metric - pair[1].metric) / (2 * EPS)
+        for name, g in (("scored", ev.grad_x), ("straight-through", st.grad_x)):
+            an = float((g * d).sum())
+            errors[name].append(abs(fd - an) / max(abs(fd), abs(an)))
+            print(f"{task_name} {name}: fd {fd:.6e} analytic {an:.6e}")
+    assert len(errors["scored"]) == 2, "every direction flipped a site"
+    assert max(errors["scored"]) < TOL
+    assert max(errors["straight-through"]) > 10 * TOL

@@ -56,6 +56,14 @@ class CodesignConfig:
     target: str = "x0"  # R evaluated on the denoiser's x0-estimate ("x0") or on x_t ("xt")
     min_move: float = 0.0  # floor of the physics displacement per stop (model-space RMS)
     smooth: bool = False  # physics gradient of the robot with smooth presence (no threshold)
+    # dbtool's own (docs/method.md §5): the gradient of the scored robot (active sites only;
+    # "straight": the straight-through gradient of the band too), the physics step's length
+    # chosen by the simulator among these RMS displacements of the design (prior frame; empty:
+    # the renorm-capped step), and the design handed over: the best one the chain evaluated
+    # ("best") or its final sample ("final")
+    gradient: str = "scored"
+    search: tuple[float, ...] = (0.02, 0.04, 0.08)
+    handover: str = "best"
 
 
 TABLE4 = {
@@ -95,6 +103,12 @@ def preset(name: str, task: str) -> tuple[EmbeddingConfig, CodesignConfig]:
         cod = replace(cod, step_scale=drift_budget(paper) / drift_budget(cod),
                       gamma=paper.gamma * n_steps(paper) / n_steps(cod))
     return emb, cod
+
+
+def step_units(cfg: CodesignConfig, grad_cost: float) -> float:
+    """Simulator units of one Langevin step: a gradient episode (``grad_cost`` forward
+    episodes) plus one forward episode per line-search step length."""
+    return grad_cost + (len(cfg.search) if cfg.kappa > 0 and cfg.target == "x0" else 0)
 
 
 def n_steps(cfg: CodesignConfig) -> int:

@@ -63,12 +63,18 @@ def guidance_terms(prior, c: torch.Tensor, guidance: float, prompt: str | None =
 def codesign_design(prior, task: Task, conds: list[tuple], cfg: CodesignConfig, seed: int,
                     steps: int, n_steps: int = N_STEPS, on_step=None) -> dict:
     """One design of diffusion as co-design (docs/method.md §5) and its score:
-    ``{"cloud", "metric", "controller"}``; the metric is the forward-only performance with the
-    co-optimised controller (NaN where the design cannot be robotized or simulated)."""
+    ``{"cloud", "metric", "controller", "stop"}``. The final sample is scored forward with
+    its co-optimised controller (NaN where it cannot be robotized or simulated); with
+    ``cfg.handover == "best"`` the best design the chain simulated replaces it when it scored
+    higher, and ``stop`` is the timestep that made it (None: the final sample)."""
     res = codesign_sample(prior, task, conds, cfg, seed=seed, steps=steps, n_steps=n_steps,
                           on_step=on_step)
     metric = float(score(res.cloud[None], task, n_steps, controllers=[res.controller])[0])
-    return {"cloud": res.cloud, "metric": metric, "controller": res.controller}
+    out = {"cloud": res.cloud, "metric": metric, "controller": res.controller, "stop": None}
+    b = res.best
+    if cfg.handover == "best" and b is not None and not metric >= b.metric:
+        out = {"cloud": b.cloud, "metric": b.metric, "controller": b.controller, "stop": b.t}
+    return out
 
 
 @dataclass
@@ -180,6 +186,7 @@ class DesignRun:
               "buffer": {k: torch.as_tensor(v) for k, v in buf.items()},
               "rows": json.dumps(self.state.rows), "samples": [
                   {"cloud": torch.as_tensor(s["cloud"]), "metric": s["metric"],
+                   "stop": -1 if s.get("stop") is None else int(s["stop"]),
                    "controller": None if s["controller"] is None
                    else torch.as_tensor(s["controller"])} for s in self.state.samples]}
 
@@ -217,6 +224,7 @@ class DesignRun:
                                          {k: v.numpy() for k, v in ck["buffer"].items()})
             run.state = State(int(ck["epoch"]), json.loads(ck["rows"]), [
                 {"cloud": s["cloud"].numpy(), "metric": float(s["metric"]),
+                 "stop": None if int(s.get("stop", -1)) < 0 else int(s["stop"]),
                  "controller": None if s["controller"] is None else s["controller"].numpy()}
                 for s in ck["samples"]])
         except RunError:
@@ -264,7 +272,8 @@ class DesignRun:
                     self.settings.n_steps,
                     on_step=lambda r, k=k: self.log(phase="codesign", sample=k, **r))
                 self.state.samples.append(sample)
-                self.log(phase="codesign", sample=k, final=True, metric=sample["metric"])
+                self.log(phase="codesign", sample=k, final=True, metric=sample["metric"],
+                         stop=sample["stop"])
                 self.checkpoint()
                 bar.update(1)
         return self.finish()
@@ -284,7 +293,7 @@ class DesignRun:
         from dbtool.sim.rollout import simulate
         from dbtool.viz.render import montage
 
-        ok = [dict(s, source="co-design") for s in self.state.samples
+        ok = [dict(s, source=source(s)) for s in self.state.samples
               if np.isfinite(s["metric"])]
         elite = self.opt.buffer.elite[:1]
         ok += [{"cloud": e.cloud, "metric": e.metric, "controller": None,
@@ -311,6 +320,12 @@ class DesignRun:
         montage(ro.episode, ro.positions, self.path / "montage.png",
                 title=f"{self.task.title}: metric {ro.metric:.4f}")
         return design
+
+
+def source(sample: dict) -> str:
+    """Which stage made a co-designed sample: its final sample or the stop of the chain."""
+    stop = sample.get("stop")
+    return "co-design (final sample)" if stop is None else f"co-design (stop t = {stop})"
 
 
 def performance_figure(rows: list[dict], path: Path, title: str) -> Path:

@@ -27,6 +27,19 @@ and ``-log p`` descended (``+s``). The controller phi is the per-step actuation 
 initialised from the task's prescribed controller. ``abar_t``, ``beta_t``, the score's
 ``sqrt(1 - abar_t)`` and the x0-estimate come from the prior's sampler
 (:class:`~dbtool.prior.schedulers.Scheduler`), which also takes the ordinary steps between stops.
+
+dbtool's defaults depart from the fixed step above (docs/method.md §5, measured in
+docs/codesign.md): ``g`` is the gradient of the robot that is scored (``gradient="scored"``:
+active sites only, no straight-through band), and with ``search`` the physics step's length is
+chosen by the simulator: the design ``x0_hat + a g / rms(g)`` is simulated for each ``a`` in
+``search`` (RMS displacement, prior frame) and x_t moves by ``sqrt(abar_t) a* g / rms(g)``
+for the best ``a*`` (0 when none beats ``x0_hat``)::
+
+    x_t  <- x_t + eta_t * s + sqrt(abar_t) * a* * g / rms(g) + sigma_t * z
+
+Every design the chain simulates is a candidate; with ``handover="best"`` the best of them
+(or the final sample, if it scores higher) is the design handed over, and the result says at
+which stop it was made.
 """
 
 from __future__ import annotations
@@ -72,17 +85,39 @@ class Physics:
 
 def physics(x_model: torch.Tensor, t: int, task: Task, phi: np.ndarray | None,
             n_steps: int = N_STEPS, noisy: bool = True, smooth: bool = False,
-            schedule: Scheduler | None = None) -> Physics:
+            schedule: Scheduler | None = None, band: bool = True) -> Physics:
     """Robotize ``x_model`` and differentiate the episode; ``noisy`` robotizes it as an x_t
     (noise-aware, docs/method.md §2), else as a clean cloud; ``smooth`` simulates the robot with
     smooth presence (occupancy-weighted mass, no threshold); ``schedule`` gives x_t's noise
-    level (default: the cosine schedule)."""
+    level (default: the cosine schedule); ``band=False`` differentiates the active sites only
+    (the gradient of the scored robot)."""
     x = x_model.detach().reshape(-1, 3).double().numpy() / SCALE
     noise = noise_std(t, schedule) if noisy and t > 0 else None
     ev = evaluate_full(x, task, phi, need_grad=True, noise=noise, n_steps=n_steps,
-                       threshold=0.0 if smooth else None)
+                       threshold=0.0 if smooth else None, band=band)
     g = torch.as_tensor(ev.grad_x, dtype=torch.float32).reshape(-1, 3) / SCALE
     return Physics(ev.metric, g, ev.grad_actions)
+
+
+def forward_metric(x_model: torch.Tensor, task: Task, phi: np.ndarray | None,
+                   n_steps: int = N_STEPS) -> float:
+    """Forward-only performance of the clean design ``x_model`` (NaN if it fails)."""
+    x = x_model.detach().reshape(-1, 3).double().numpy() / SCALE
+    try:
+        return float(evaluate_full(x, task, phi, need_grad=False, n_steps=n_steps).metric)
+    except (RobotizeError, SimulationError, FloatingPointError):
+        return float("nan")
+
+
+@dataclass
+class Candidate:
+    """A design the chain simulated: cloud (prior frame), its metric, the controller it was
+    simulated with and the stop ``t`` that made it."""
+
+    cloud: np.ndarray
+    metric: float
+    controller: np.ndarray | None
+    t: int
 
 
 @dataclass
@@ -90,6 +125,34 @@ class CodesignResult:
     cloud: np.ndarray  # (N, 3), prior frame
     controller: np.ndarray | None
     history: list[dict] = field(default_factory=list)
+    best: Candidate | None = None  # the best design the chain simulated
+
+
+def _keep(best: Candidate | None, x_model: torch.Tensor, metric: float,
+          phi: np.ndarray | None, t: int) -> Candidate | None:
+    if not np.isfinite(metric) or (best is not None and metric <= best.metric):
+        return best
+    cloud = x_model.detach().reshape(-1, 3).numpy().astype(np.float64) / SCALE
+    return Candidate(cloud, float(metric), None if phi is None else phi.copy(), t)
+
+
+def line_search(x0: torch.Tensor, g: torch.Tensor, m0: float, task: Task,
+                phi: np.ndarray | None, steps, n_steps: int = N_STEPS):
+    """Simulate ``x0 + a g / rms(g)`` (``a`` in prior-frame RMS) for each ``a`` of ``steps``;
+    returns ``(a*, the model-space direction, [(a, design, metric)])`` where ``a*`` is the best
+    step, 0 unless one beats ``m0``."""
+    r = rms(g)
+    if not np.isfinite(r) or r == 0.0:
+        return 0.0, torch.zeros_like(g), []
+    d = g / r * SCALE
+    tried, best_a, best_m = [], 0.0, m0
+    for a in steps:
+        xa = x0 + a * d
+        m = forward_metric(xa, task, phi, n_steps)
+        tried.append((float(a), xa, m))
+        if np.isfinite(m) and m > best_m:
+            best_a, best_m = float(a), m
+    return best_a, d, tried
 
 
 def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float]],
@@ -111,6 +174,8 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
     at = stops(cfg)
     history: list[dict] = []
     last = None
+    best: Candidate | None = None
+    searching = bool(cfg.search) and cfg.target == "x0"
     for step in prior.sampler(conds, 1, steps, seed, include=at):
         last = step
         if step.t not in at or cfg.K < 1:
@@ -125,31 +190,43 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
             eps = guided_eps(prior.eps, x, t, conds)
             score = -eps / sched.sigma(t)
             row = {"t": t, "k": k, "score_rms": rms(score)}
-            drift = score
+            drift, move = score, 0.0
             if cfg.kappa > 0:
+                band = cfg.gradient == "straight"
+                x0 = sched.predict_x0(x, t, eps) if cfg.target == "x0" else x
                 try:
                     if cfg.target == "x0":
-                        ph = physics(sched.predict_x0(x, t, eps), t, task, phi, n_steps,
-                                     noisy=False, smooth=cfg.smooth)
+                        ph = physics(x0, t, task, phi, n_steps, noisy=False,
+                                     smooth=cfg.smooth, band=band)
                         ph.grad_x = ph.grad_x / ab ** 0.5
                     else:
                         ph = physics(x, t, task, phi, n_steps, smooth=cfg.smooth,
-                                     schedule=sched)
+                                     schedule=sched, band=band)
                 except (RobotizeError, SimulationError, FloatingPointError) as exc:
                     row["error"] = str(exc)
                 else:
                     raw = cfg.kappa * ph.grad_x.reshape(x.shape)
-                    p = clip_rms(raw, cfg.renorm)
-                    drift = score + (eta_r / eta) * p  # eta_r / eta is exactly 1 above the floor
-                    row.update(metric=ph.metric, physics_rms=rms(raw), applied_rms=rms(p),
-                               physics_move=eta_r * rms(p))
+                    row.update(metric=ph.metric, physics_rms=rms(raw))
+                    if searching:  # the simulator picks the step (module docstring)
+                        best = _keep(best, x0, ph.metric, phi, t)
+                        a, d, tried = line_search(x0, raw, ph.metric, task, phi, cfg.search,
+                                                  n_steps)
+                        for _, xa, m in tried:
+                            best = _keep(best, xa, m, phi, t)
+                        move = ab ** 0.5 * a * d
+                        row.update(search=[m for *_, m in tried], step=a,
+                                   physics_move=a * SCALE * ab ** 0.5)
+                    else:
+                        p = clip_rms(raw, cfg.renorm)
+                        drift = score + (eta_r / eta) * p  # eta_r / eta is 1 above the floor
+                        row.update(applied_rms=rms(p), physics_move=eta_r * rms(p))
                     if active and ph.grad_phi is not None:
                         phi = np.clip(phi + cfg.gamma * ph.grad_phi, -1.0, 1.0)
                         row["phi_grad"] = float(np.abs(ph.grad_phi).max())
-            x = x + eta * drift + sigma * torch.randn(x.shape, generator=gen)
+            x = x + eta * drift + move + sigma * torch.randn(x.shape, generator=gen)
             history.append(row)
             if on_step is not None:
                 on_step(row)
         step.x = x
     cloud = last.x[0].numpy() / SCALE
-    return CodesignResult(cloud, phi, history)
+    return CodesignResult(cloud, phi, history, best)

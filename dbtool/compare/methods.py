@@ -117,21 +117,26 @@ def _prior_samples(task: Task, budget: Budget, seed: int, log) -> Outcome:
 
 def diffusebot_plan(task: str, budget: Budget) -> dict:
     """How DiffuseBot spends ``budget.units - 1`` units: the paper's Tables 4-5 when they fit,
-    otherwise half on co-design (one sample, ``s`` Langevin steps of ``GRAD_COST + 1`` units
-    with its scoring episode) and the rest on embedding epochs of ``S`` designs."""
-    from dbtool.codesign.config import TABLE4, TABLE5, n_steps
+    otherwise half on co-design (one sample of ``s`` Langevin steps, each a gradient episode
+    and the line search's forward episodes (:func:`step_units`), plus its scoring episode) and
+    the rest on embedding epochs of ``S`` designs."""
+    from dbtool.codesign.config import TABLE4, TABLE5, n_steps, step_units
 
     free = budget.units - 1
     paper_emb, paper_cod = TABLE4[task], TABLE5[task]
+    unit = step_units(paper_cod, GRAD_COST)
     paper_cost = (paper_emb.epochs * paper_emb.samples_per_epoch
-                  + paper_cod.samples * (GRAD_COST * n_steps(paper_cod) + 1))
+                  + paper_cod.samples * (unit * n_steps(paper_cod) + 1))
     if paper_cost <= free:
         return {"preset": "paper", "epochs": paper_emb.epochs,
                 "samples_per_epoch": paper_emb.samples_per_epoch,
                 "codesign_samples": paper_cod.samples, "langevin_steps": n_steps(paper_cod),
                 "planned_units": paper_cost + 1}
-    steps = max(1, int((free // 2 - 1) // GRAD_COST))
-    cd = GRAD_COST * steps + 1
+    # the line search keeps the step lengths that fit in half the budget (none: the fixed step)
+    search = int(min(unit - GRAD_COST, max(0, free // 2 - 1 - GRAD_COST)))
+    unit = GRAD_COST + search
+    steps = max(1, int((free // 2 - 1) // unit))
+    cd = unit * steps + 1
     emb_units = int(free - cd)
     if emb_units < 2:
         raise ValueError(f"a budget of {budget.units} units is too small for DiffuseBot: it "
@@ -140,7 +145,7 @@ def diffusebot_plan(task: str, budget: Budget) -> dict:
     epochs = int(np.clip(emb_units // 60, 2, 20))
     per_epoch = max(1, emb_units // epochs)
     return {"preset": "quick", "epochs": epochs, "samples_per_epoch": per_epoch,
-            "codesign_samples": 1, "langevin_steps": steps,
+            "codesign_samples": 1, "langevin_steps": steps, "line_search": search,
             "planned_units": epochs * per_epoch + cd + 1}
 
 
@@ -163,7 +168,8 @@ def diffusebot_configs(task: str, budget: Budget):
         k = plan["langevin_steps"]
         span = cod.t_max - cod.t_min
         dt = span + 1 if k == 1 else -(-span // (k - 1))
-        cod = replace(cod, K=1, dt=dt, samples=plan["codesign_samples"])
+        cod = replace(cod, K=1, dt=dt, samples=plan["codesign_samples"],
+                      search=tuple(cod.search[:plan["line_search"]]))
         paper = TABLE5[task]
         cod = replace(cod, step_scale=drift_budget(paper) / drift_budget(cod),
                       gamma=paper.gamma * n_steps(paper) / n_steps(cod))
@@ -171,7 +177,7 @@ def diffusebot_configs(task: str, budget: Budget):
 
 
 def _diffusebot(task: Task, budget: Budget, seed: int, log) -> Outcome:
-    from dbtool.codesign.design_run import codesign_design, guidance_terms
+    from dbtool.codesign.design_run import codesign_design, guidance_terms, source
     from dbtool.codesign.embedding import EmbeddingOptimiser
 
     prior = load_prior()
@@ -190,7 +196,7 @@ def _diffusebot(task: Task, budget: Budget, seed: int, log) -> Outcome:
                             on_step=lambda r, k=k: log(phase="codesign", sample=k, **r))
         log(phase="codesign", sample=k, final=True, metric=s["metric"])
         if np.isfinite(s["metric"]):
-            cands.append((s["metric"], s["cloud"], s["controller"], "co-design"))
+            cands.append((s["metric"], s["cloud"], s["controller"], source(s)))
     for e in opt.buffer.elite[:1]:
         cands.append((e.metric, e.cloud, None, f"embedding epoch {e.epoch}"))
     if not cands:

@@ -4,10 +4,13 @@ Psi (:func:`dbtool.robotize.robotizer.robotize`) builds the robot, the different
 (:func:`dbtool.sim.rollout.simulate`) scores it and returns d metric / d occupancy per design
 particle, and the robotizer's vector-Jacobian product chains that to d metric / d x.
 
-With gradients, the simulated particles are the lattice sites of occupancy above ``BAND``
-(the solid plus a band of about 3.5 lattice spacings around it): inactive band particles carry
-no mass but receive the straight-through gradient that lets the surface grow. Without
-gradients only the active particles are simulated.
+With gradients and ``band`` (the default), the simulated particles are the lattice sites of
+occupancy above ``BAND`` (the solid plus a band of about 3.5 lattice spacings around it):
+inactive band particles carry no mass but receive the straight-through gradient that lets the
+surface grow. With ``band=False`` only the active particles are simulated and differentiated:
+the gradient of the robot that is scored (its mass follows the occupancy of its active sites),
+exact wherever no site crosses the threshold (docs/method.md §5). Without gradients only the
+active particles are simulated.
 """
 
 from __future__ import annotations
@@ -38,17 +41,19 @@ class Evaluation:
 def evaluate_full(x, task: Task, controller: np.ndarray | None = None, need_grad: bool = True,
                   cfg: RobotizeConfig | None = None, noise: float | None = None,
                   method: str = "dpsr", n_steps: int = N_STEPS, threshold: float | None = None,
-                  progress: Callable[[int], object] | None = None) -> Evaluation:
+                  progress: Callable[[int], object] | None = None, band: bool = True
+                  ) -> Evaluation:
     """Robotize ``x``, simulate with ``controller`` (default: the task's prescribed one) and,
     with ``need_grad``, return d metric / d x and d metric / d controller. ``threshold``
     overrides the robot's presence threshold (0: smooth presence, see :class:`Robot`);
+    ``band=False`` differentiates the active sites only (module docstring);
     ``progress(1)`` is called as each control step finishes."""
     rz = robotize(x, task, cfg, noise=noise, method=method)
     robot = rz.robot
     if threshold is not None:
         robot.threshold = threshold
     smooth = robot.threshold < BAND
-    sel = robot.occupancy > BAND if need_grad or smooth else robot.active()
+    sel = robot.occupancy > BAND if (need_grad and band) or smooth else robot.active()
     ro = simulate(task, robot.subset(sel), controller, grad=need_grad, n_steps=n_steps,
                   progress=progress)
     if not need_grad:

@@ -1,0 +1,170 @@
+"""Does the physics term deliver? Diffusion as co-design against its kappa = 0 ablation and
+against best-of-N sampling at the same simulator budget (docs/codesign.md).
+
+For each task, each optimised embedding ``c`` (the condition the mixture's embedding
+optimisation handed to co-design for embedding seeds 0-3, stored in
+``benchmarks/results/legacy/codesign-embedding.json``; other tasks use their best caption, see
+``--captions``) and each sampler seed ``j``:
+
+* ``kappa = 0``: the plain sampler with score-only Langevin steps (no simulator call), its final
+  sample scored: the pool of draws ``j = 0 .. N-1`` of that ``c``;
+* ``kappa > 0``: the quick preset's co-design sample (``CodesignConfig`` defaults) for the
+  sampler seeds ``j < --codesign`` (paired with the pool's draws of the same seed: the same
+  initial noise and sampler noise until the first physics step), with the simulator units
+  it spent (a gradient episode counts ``GRAD_COST``);
+* best-of-N: the expected maximum of ``N`` draws (without replacement) from the pool, where
+  ``N`` is the co-design sample's units.
+
+Every unit is cached as JSON under ``--cache`` so an interrupted run continues. Prints tables
+(per draw, paired differences with z) and writes ``benchmarks/results/codesign-physics.json``.
+
+Usage::
+
+    python benchmarks/codesign_physics.py --tasks crawling gripping --pool 36 --codesign 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import time
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _results import write_result  # noqa: E402
+
+from dbtool.atomic import atomic_write_text  # noqa: E402
+from dbtool.codesign.config import preset  # noqa: E402
+from dbtool.codesign.design_run import codesign_design  # noqa: E402
+from dbtool.compare.budget import used  # noqa: E402
+from dbtool.sim import simulator  # noqa: E402
+from dbtool.sim.tasks import get_task  # noqa: E402
+
+HERE = Path(__file__).parent
+EMBEDDINGS = HERE / "results" / "legacy" / "codesign-embedding.json"
+# tasks without a stored embedding run: the caption the mixture concentrates on there
+CAPTIONS = {"hurdling": "a block", "box": "a block", "balancing": "a ball",
+            "landing": "a block"}
+
+
+def conditions(task: str, seeds: list[int], prior) -> list[tuple[str, torch.Tensor]]:
+    """``(label, c)`` per embedding seed: the stored optimised ``c`` where the embedding
+    experiment ran for (task, seed), else the task's caption (one condition)."""
+    runs = json.loads(EMBEDDINGS.read_text())
+    if task in runs:
+        return [(f"embedding seed {s}", torch.tensor(runs[task]["runs"][s]["c"])[None])
+                for s in seeds]
+    return [(f"caption {CAPTIONS[task]!r}", prior.embed(CAPTIONS[task]))]
+
+
+def expected_best(pool: np.ndarray, n: int) -> float:
+    """Expected maximum of ``n`` draws without replacement from ``pool`` (exact, by order
+    statistics)."""
+    v = np.sort(pool[np.isfinite(pool)])
+    m = len(v)
+    n = min(n, m)
+    # P(max is the i-th smallest) = C(i-1, n-1) / C(m, n), i = n..m
+    w = np.array([math.comb(i - 1, n - 1) for i in range(1, m + 1)], float) / math.comb(m, n)
+    return float((w * v).sum())
+
+
+def run_unit(cache: Path, name: str, fn) -> dict:
+    path = cache / f"{name}.json"
+    if path.is_file():
+        return json.loads(path.read_text())
+    t0 = time.perf_counter()
+    before = dict(simulator.EPISODES)
+    out = fn()
+    fwd = simulator.EPISODES["forward"] - before["forward"]
+    bwd = simulator.EPISODES["backward"] - before["backward"]
+    out.update(forward=fwd, backward=bwd, units=used(fwd, bwd),
+               seconds=time.perf_counter() - t0)
+    atomic_write_text(path, json.dumps(out))
+    print(name, json.dumps({k: v for k, v in out.items() if not isinstance(v, list)}),
+          flush=True)
+    return out
+
+
+def draw(prior, task, c, cod, seed: int, steps: int) -> dict:
+    s = codesign_design(prior, get_task(task), [(c, 3.0)], cod, seed, steps)
+    return {"metric": s["metric"], "stop": s["stop"]}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--tasks", nargs="+", default=["crawling", "gripping"])
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3],
+                    help="embedding seeds")
+    ap.add_argument("--pool", type=int, default=36, help="kappa = 0 draws per embedding")
+    ap.add_argument("--codesign", type=int, default=2, help="kappa > 0 draws per embedding")
+    ap.add_argument("--cache", type=Path,
+                    default=Path.home() / ".cache" / "dbtool" / "codesign-physics")
+    ap.add_argument("--only", choices=["pool", "codesign"], default=None)
+    a = ap.parse_args()
+    from dbtool.prior.pipeline import Prior
+
+    prior = Prior.load()
+    a.cache.mkdir(parents=True, exist_ok=True)
+    result: dict = {"pool": a.pool, "codesign": a.codesign}
+    for task in a.tasks:
+        emb, cod = preset("quick", task)
+        cod0 = replace(cod, kappa=0.0)
+        rows = []
+        for label, c in conditions(task, a.seeds, prior):
+            tag = f"{task}-{label.replace(' ', '_').replace(chr(39), '')}"
+            pool, cds = [], []
+            n_pool = a.pool if a.only != "codesign" else a.codesign
+            order = [("k0", j) for j in range(min(a.codesign, n_pool))]
+            if a.only != "pool":
+                order += [("k1", j) for j in range(a.codesign)]
+            order += [("k0", j) for j in range(a.codesign, n_pool)]
+            for kind, j in order:  # the paired draws first
+                cfg = cod0 if kind == "k0" else cod
+                r = run_unit(a.cache, f"{tag}-{kind}-{j}", lambda j=j, cfg=cfg, c=c, t=task,
+                             n=emb.sample_steps: draw(prior, t, c, cfg, j, n))
+                (pool if kind == "k0" else cds).append(r if kind == "k1" else r["metric"])
+            pool_a = np.array(pool, float)
+            for j, r in enumerate(cds):
+                rows.append({"condition": label, "seed": j, "kappa0": pool[j],
+                             "kappa": r["metric"], "stop": r["stop"], "units": r["units"],
+                             "best_of_n": expected_best(pool_a, int(round(r["units"]))),
+                             "pool_mean": float(np.nanmean(pool_a)), "pool_n": len(pool)})
+        result[task] = {"rows": rows, "codesign": asdict(cod)}
+        if rows:
+            report(task, rows)
+    if a.only is None:
+        write_result(result, None, HERE / "results" / "codesign-physics.json", False,
+                     {"benchmark": "codesign-physics", "tasks": a.tasks, "seeds": a.seeds,
+                      "pool": a.pool, "codesign": a.codesign})
+
+
+def z_paired(d: list[float]) -> tuple[float, float, float]:
+    m = statistics.fmean(d)
+    s = statistics.stdev(d) if len(d) > 1 else float("nan")
+    return m, s, m / (s / math.sqrt(len(d))) if s and s > 0 else float("inf")
+
+
+def report(task: str, rows: list[dict]) -> None:
+    print(f"\n{task}\n\n| condition | seed | kappa = 0 | kappa > 0 | made at | units | "
+          "best-of-N (N = units) |\n|---|---:|---:|---:|---|---:|---:|")
+    for r in rows:
+        stop = "final sample" if r["stop"] is None else f"t = {r['stop']}"
+        print(f"| {r['condition']} | {r['seed']} | {r['kappa0']:.5f} | {r['kappa']:.5f} | "
+              f"{stop} | {r['units']:.0f} | {r['best_of_n']:.5f} |")
+    for name, key in (("kappa = 0", "kappa0"), ("best-of-N", "best_of_n")):
+        d = [r["kappa"] - r[key] for r in rows]
+        m, s, z = z_paired(d)
+        wins = sum(x > 0 for x in d)
+        print(f"{task}: kappa > 0 minus {name}: mean {m:+.5f} (sd {s:.5f}, n = {len(d)}, "
+              f"{wins} wins), z = {z:.2f}")
+
+
+if __name__ == "__main__":
+    main()
