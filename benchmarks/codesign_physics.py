@@ -54,14 +54,16 @@ CAPTIONS = {"hurdling": "a block", "box": "a block", "balancing": "a ball",
             "landing": "a block"}
 
 
-def conditions(task: str, seeds: list[int], prior) -> list[tuple[str, torch.Tensor]]:
-    """``(label, c)`` per embedding seed: the stored optimised ``c`` where the embedding
-    experiment ran for (task, seed), else the task's caption (one condition)."""
+def conditions(task: str, seeds: list[int], prior) -> list[tuple[str, int, torch.Tensor]]:
+    """``(label, seed, c)`` per embedding seed: the stored optimised ``c`` where the embedding
+    experiment ran for (task, seed), else the task's caption (one condition, seed 0). The
+    sampler seeds of a condition are ``1000 seed + j``, so two seeds whose optimisation ended
+    on the same condition still give different draws."""
     runs = json.loads(EMBEDDINGS.read_text())
     if task in runs:
-        return [(f"embedding seed {s}", torch.tensor(runs[task]["runs"][s]["c"])[None])
+        return [(f"embedding seed {s}", s, torch.tensor(runs[task]["runs"][s]["c"])[None])
                 for s in seeds]
-    return [(f"caption {CAPTIONS[task]!r}", prior.embed(CAPTIONS[task]))]
+    return [(f"caption {CAPTIONS[task]!r}", 0, prior.embed(CAPTIONS[task]))]
 
 
 def expected_best(pool: np.ndarray, n: int) -> float:
@@ -117,7 +119,7 @@ def main() -> None:
         emb, cod = preset("quick", task)
         cod0 = replace(cod, kappa=0.0)
         rows = []
-        for label, c in conditions(task, a.seeds, prior):
+        for label, s, c in conditions(task, a.seeds, prior):
             tag = f"{task}-{label.replace(' ', '_').replace(chr(39), '')}"
             pool, cds = [], []
             n_pool = a.pool if a.only != "codesign" else a.codesign
@@ -126,13 +128,13 @@ def main() -> None:
                 order += [("k1", j) for j in range(a.codesign)]
             order += [("k0", j) for j in range(a.codesign, n_pool)]
             for kind, j in order:  # the paired draws first
-                cfg = cod0 if kind == "k0" else cod
-                r = run_unit(a.cache, f"{tag}-{kind}-{j}", lambda j=j, cfg=cfg, c=c, t=task,
-                             n=emb.sample_steps: draw(prior, t, c, cfg, j, n))
+                cfg, seed = (cod0 if kind == "k0" else cod), 1000 * s + j
+                r = run_unit(a.cache, f"{tag}-{kind}-{seed}", lambda seed=seed, cfg=cfg, c=c,
+                             t=task, n=emb.sample_steps: draw(prior, t, c, cfg, seed, n))
                 (pool if kind == "k0" else cds).append(r if kind == "k1" else r["metric"])
             pool_a = np.array(pool, float)
             for j, r in enumerate(cds):
-                rows.append({"condition": label, "seed": j, "kappa0": pool[j],
+                rows.append({"condition": label, "seed": 1000 * s + j, "kappa0": pool[j],
                              "kappa": r["metric"], "stop": r["stop"], "units": r["units"],
                              "best_of_n": expected_best(pool_a, int(round(r["units"]))),
                              "pool_mean": float(np.nanmean(pool_a)), "pool_n": len(pool)})

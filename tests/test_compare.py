@@ -249,9 +249,9 @@ def test_space_separated_lists_reach_every_value(tmp_path):
 # ------------------------------------------------------------------------- budget arithmetic
 PLANS = {  # (epochs, samples per epoch, co-design samples, Langevin steps, planned units)
     "smoke": {t: (2, 1, 1, 1, 8) for t in TASKS},
-    "quick": {t: (2, 5, 1, 2, 20) for t in TASKS},
-    "paper": {"balancing": (20, 60, 4, 27, 1637), "landing": (20, 60, 4, 21, 1541),
-              **{t: (20, 60, 4, 45, 1925) for t in ("crawling", "hurdling", "gripping", "box")}},
+    "quick": {t: (2, 5, 1, 1, 19) for t in TASKS},
+    "paper": {"balancing": (20, 60, 4, 27, 1961), "landing": (20, 60, 4, 21, 1793),
+              **{t: (20, 60, 4, 45, 2465) for t in ("crawling", "hurdling", "gripping", "box")}},
 }
 
 
@@ -262,7 +262,7 @@ def test_every_method_fits_the_budget(name):
     budget = get_budget(name)
     assert used(3, 2) == 3 + 2 * (GRAD_COST - 1) == 9.0
     n = gradient_iterations(budget.units)
-    assert n == {"smoke": 1, "quick": 4, "paper": 499}[name]
+    assert n == {"smoke": 1, "quick": 4, "paper": 624}[name]
     assert used(n + 1, n) <= budget.units < used(n + 2, n + 1)  # all that fits, and no more
     for task in TASKS:
         plan = diffusebot_plan(task, budget)
@@ -271,11 +271,13 @@ def test_every_method_fits_the_budget(name):
         assert sizes == PLANS[name][task]
         assert plan["preset"] == ("paper" if name == "paper" else "quick")
         assert plan["planned_units"] <= budget.units
+        emb, cod, _ = diffusebot_configs(task, budget)
+        search = len(cod.search)  # forward episodes of each step's line search
+        assert search == {"smoke": 0, "quick": 3, "paper": 3}[name]
         assert plan["planned_units"] == (
             plan["epochs"] * plan["samples_per_epoch"] + 1
-            + plan["codesign_samples"] * used(plan["langevin_steps"] + 1,
+            + plan["codesign_samples"] * used(plan["langevin_steps"] * (1 + search) + 1,
                                               plan["langevin_steps"]))
-        emb, cod, _ = diffusebot_configs(task, budget)
         assert (emb.epochs, emb.samples_per_epoch, cod.samples, n_steps(cod)) == sizes[:4]
         assert emb.sample_steps == budget.sample_steps
 

@@ -37,9 +37,10 @@ BUDGETS = {
                     text="tests and CI: 8-step episodes, each cell under a minute"),
     "quick": Budget("quick", 20, text="full 100-step episodes; the table of docs/results.md "
                     "in about two hours on a 2-core CPU"),
-    "paper": Budget("paper", 2000, sample_steps=64,
+    "paper": Budget("paper", 2500, sample_steps=64,
                     text="what DiffuseBot spends at the paper's Tables 4-5 (20 epochs x 60 "
-                    "designs, 4 co-designed samples of 45 Langevin steps)"),
+                    "designs, 4 co-designed samples of 45 Langevin steps, each a gradient "
+                    "episode and a line search of 3 forward episodes)"),
 }
 
 
