@@ -133,6 +133,8 @@ def main() -> None:
     write_result({"task": args.task, "seed": args.seed, "quick": args.quick,
                   "total_s": total, "prior_load_s": load_s, "peak_rss_mib": peak_mib,
                   "final_metric": design.metrics[args.task],
+                  "source": design.meta.get("source"),
+                  "samples": design.meta.get("samples"),
                   "stages_s": {k: v for k, v, _ in rows},
                   "stage_calls": {k: n for k, _, n in rows[:-1]}}, args.out,
                  Path(__file__).parent / "results" / "design.json", args.quick,
