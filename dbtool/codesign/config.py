@@ -65,6 +65,11 @@ class CodesignConfig:
     search: tuple[float, ...] = (0.02, 0.04, 0.08)
     handover: str = "best"
 
+    @property
+    def searching(self) -> bool:
+        """Whether the physics step is chosen by the line search (else the fixed step)."""
+        return self.kappa > 0 and bool(self.search) and self.target == "x0"
+
 
 TABLE4 = {
     "balancing": EmbeddingConfig(buffer_size=600, top_k=12),
@@ -108,7 +113,7 @@ def preset(name: str, task: str) -> tuple[EmbeddingConfig, CodesignConfig]:
 def step_units(cfg: CodesignConfig, grad_cost: float) -> float:
     """Simulator units of one Langevin step: a gradient episode (``grad_cost`` forward
     episodes) plus one forward episode per line-search step length."""
-    return grad_cost + (len(cfg.search) if cfg.kappa > 0 and cfg.target == "x0" else 0)
+    return grad_cost + (len(cfg.search) if cfg.searching else 0)
 
 
 def n_steps(cfg: CodesignConfig) -> int:

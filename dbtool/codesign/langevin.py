@@ -51,6 +51,7 @@ import numpy as np
 import torch
 
 from dbtool.codesign.config import CodesignConfig
+from dbtool.codesign.embedding import score
 from dbtool.prior.diffusion import SCALE, guided_eps, noise_std
 from dbtool.prior.schedulers import Scheduler
 from dbtool.robotize import RobotizeError, evaluate_full
@@ -102,11 +103,8 @@ def physics(x_model: torch.Tensor, t: int, task: Task, phi: np.ndarray | None,
 def forward_metric(x_model: torch.Tensor, task: Task, phi: np.ndarray | None,
                    n_steps: int = N_STEPS) -> float:
     """Forward-only performance of the clean design ``x_model`` (NaN if it fails)."""
-    x = x_model.detach().reshape(-1, 3).double().numpy() / SCALE
-    try:
-        return float(evaluate_full(x, task, phi, need_grad=False, n_steps=n_steps).metric)
-    except (RobotizeError, SimulationError, FloatingPointError):
-        return float("nan")
+    x = x_model.detach().reshape(1, -1, 3).double().numpy() / SCALE
+    return float(score(x, task, n_steps, controllers=[phi])[0])
 
 
 @dataclass
@@ -175,7 +173,6 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
     history: list[dict] = []
     last = None
     best: Candidate | None = None
-    searching = bool(cfg.search) and cfg.target == "x0"
     for step in prior.sampler(conds, 1, steps, seed, include=at):
         last = step
         if step.t not in at or cfg.K < 1:
@@ -207,7 +204,7 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
                 else:
                     raw = cfg.kappa * ph.grad_x.reshape(x.shape)
                     row.update(metric=ph.metric, physics_rms=rms(raw))
-                    if searching:  # the simulator picks the step (module docstring)
+                    if cfg.searching:  # the simulator picks the step (module docstring)
                         best = _keep(best, x0, ph.metric, phi, t)
                         a, d, tried = line_search(x0, raw, ph.metric, task, phi, cfg.search,
                                                   n_steps)
