@@ -3,8 +3,10 @@ against best-of-N sampling at the same simulator budget (docs/codesign.md).
 
 For each task, each optimised embedding ``c`` (the condition the mixture's embedding
 optimisation handed to co-design for embedding seeds 0-3, stored in
-``benchmarks/results/legacy/codesign-embedding.json``; other tasks use their best caption, see
-``--captions``) and each sampler seed ``j``:
+``benchmarks/results/legacy/codesign-embedding.json``; other tasks use the family caption that
+scores best in a one-draw screen, :func:`best_caption`; such a task takes ``--codesign`` x
+(number of seeds) draws from its one caption and a pool of ``--caption-pool``) and each sampler
+seed ``j``:
 
 * ``kappa = 0``: the plain sampler with score-only Langevin steps (no simulator call), its final
   sample scored: the pool of draws ``j = 0 .. N-1`` of that ``c``;
@@ -49,21 +51,41 @@ from dbtool.sim.tasks import get_task  # noqa: E402
 
 HERE = Path(__file__).parent
 EMBEDDINGS = HERE / "results" / "legacy" / "codesign-embedding.json"
-# tasks without a stored embedding run: the caption the mixture concentrates on there
-CAPTIONS = {"hurdling": "a block", "box": "a block", "balancing": "a ball",
-            "landing": "a block"}
+SCREEN_SEED = 999  # the sampler seed of the caption screen (never an evaluation seed)
 
 
-def conditions(task: str, seeds: list[int], prior) -> list[tuple[str, int, torch.Tensor]]:
+def conditions(task: str, seeds: list[int], prior,
+               cache: Path) -> list[tuple[str, int, torch.Tensor]]:
     """``(label, seed, c)`` per embedding seed: the stored optimised ``c`` where the embedding
-    experiment ran for (task, seed), else the task's caption (one condition, seed 0). The
-    sampler seeds of a condition are ``1000 seed + j``, so two seeds whose optimisation ended
-    on the same condition still give different draws."""
+    experiment ran for (task, seed), else the task's best caption (one condition, seed 0).
+    The sampler seeds of a condition are ``1000 seed + j``, so two seeds whose optimisation
+    ended on the same condition still give different draws."""
     runs = json.loads(EMBEDDINGS.read_text())
     if task in runs:
         return [(f"embedding seed {s}", s, torch.tensor(runs[task]["runs"][s]["c"])[None])
                 for s in seeds]
-    return [(f"caption {CAPTIONS[task]!r}", 0, prior.embed(CAPTIONS[task]))]
+    cap = best_caption(task, prior, cache)
+    return [(f"caption {cap!r}", 0, prior.embed(cap))]
+
+
+def best_caption(task: str, prior, cache: Path) -> str:
+    """The family caption whose kappa = 0 draw at ``SCREEN_SEED`` scores highest on ``task``
+    (one draw per caption the prior was trained on; a screen, not an optimisation)."""
+    from dbtool.codesign.embedding import caption_atoms
+
+    emb, cod = preset("quick", task)
+    cod0 = replace(cod, kappa=0.0)
+    names, _ = caption_atoms()
+    scores = {}
+    for cap in names:
+        r = run_unit(cache, f"{task}-screen-{cap.replace(' ', '_')}-{SCREEN_SEED}",
+                     lambda cap=cap: draw(prior, task, prior.embed(cap), cod0, SCREEN_SEED,
+                                          emb.sample_steps))
+        scores[cap] = r["metric"] if np.isfinite(r["metric"]) else -np.inf
+    best = max(scores, key=scores.get)
+    print(f"{task}: caption screen picks {best!r} ({scores[best]:.5f} of "
+          f"{len(scores)} captions)", flush=True)
+    return best
 
 
 def expected_best(pool: np.ndarray, n: int) -> float:
@@ -106,6 +128,8 @@ def main() -> None:
                     help="embedding seeds")
     ap.add_argument("--pool", type=int, default=36, help="kappa = 0 draws per embedding")
     ap.add_argument("--codesign", type=int, default=2, help="kappa > 0 draws per embedding")
+    ap.add_argument("--caption-pool", type=int, default=16,
+                    help="kappa = 0 draws of a task with one caption condition")
     ap.add_argument("--cache", type=Path,
                     default=Path.home() / ".cache" / "dbtool" / "codesign-physics")
     ap.add_argument("--only", choices=["pool", "codesign"], default=None)
@@ -114,19 +138,23 @@ def main() -> None:
 
     prior = Prior.load()
     a.cache.mkdir(parents=True, exist_ok=True)
-    result: dict = {"pool": a.pool, "codesign": a.codesign}
+    result: dict = {"pool": a.pool, "codesign": a.codesign, "caption_pool": a.caption_pool}
     for task in a.tasks:
         emb, cod = preset("quick", task)
         cod0 = replace(cod, kappa=0.0)
         rows = []
-        for label, s, c in conditions(task, a.seeds, prior):
+        conds = conditions(task, a.seeds, prior, a.cache)
+        # a task with one caption condition takes all of its paired draws from it
+        n_cd = a.codesign * len(a.seeds) // len(conds)
+        for label, s, c in conds:
             tag = f"{task}-{label.replace(' ', '_').replace(chr(39), '')}"
             pool, cds = [], []
-            n_pool = a.pool if a.only != "codesign" else a.codesign
-            order = [("k0", j) for j in range(min(a.codesign, n_pool))]
+            n_pool = a.pool if len(conds) > 1 else max(a.caption_pool, n_cd)
+            n_pool = n_pool if a.only != "codesign" else n_cd
+            order = [("k0", j) for j in range(min(n_cd, n_pool))]
             if a.only != "pool":
-                order += [("k1", j) for j in range(a.codesign)]
-            order += [("k0", j) for j in range(a.codesign, n_pool)]
+                order += [("k1", j) for j in range(n_cd)]
+            order += [("k0", j) for j in range(n_cd, n_pool)]
             for kind, j in order:  # the paired draws first
                 cfg, seed = (cod0 if kind == "k0" else cod), 1000 * s + j
                 r = run_unit(a.cache, f"{tag}-{kind}-{seed}", lambda seed=seed, cfg=cfg, c=c,
@@ -144,7 +172,8 @@ def main() -> None:
     if a.only is None:
         write_result(result, None, HERE / "results" / "codesign-physics.json", False,
                      {"benchmark": "codesign-physics", "tasks": a.tasks, "seeds": a.seeds,
-                      "pool": a.pool, "codesign": a.codesign})
+                      "pool": a.pool, "codesign": a.codesign,
+                      "caption_pool": a.caption_pool})
 
 
 def z_paired(d: list[float]) -> tuple[float, float, float]:

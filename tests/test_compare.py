@@ -257,7 +257,8 @@ PLANS = {  # (epochs, samples per epoch, co-design samples, Langevin steps, plan
 
 @pytest.mark.parametrize("name", BUDGETS)
 def test_every_method_fits_the_budget(name):
-    from dbtool.codesign.config import n_steps
+    from dbtool.codesign.config import TABLE5, n_steps
+    from dbtool.codesign.langevin import stops
 
     budget = get_budget(name)
     assert used(3, 2) == 3 + 2 * (GRAD_COST - 1) == 9.0
@@ -280,6 +281,8 @@ def test_every_method_fits_the_budget(name):
                                               plan["langevin_steps"]))
         assert (emb.epochs, emb.samples_per_epoch, cod.samples, n_steps(cod)) == sizes[:4]
         assert emb.sample_steps == budget.sample_steps
+        if name != "paper":  # one stop: at t_min with the line search, else at t_max
+            assert stops(cod) == [0 if search else TABLE5[task].t_max]
 
 
 def test_gradient_iterations_of_tiny_budgets():
