@@ -34,11 +34,14 @@ def test_spending_counts_units_as_the_budget_does(tmp_path):
     rows = [{"phase": "embedding", "epoch": 0, "mean": 0.1, "max": 0.2},
             {"phase": "embedding", "epoch": 1, "mean": 0.2, "max": 0.3},
             {"phase": "codesign", "sample": 0, "t": 400, "k": 0, "metric": 0.25},
+            {"phase": "codesign", "sample": 0, "t": 200, "k": 0, "metric": 0.24,
+             "search": [0.26, None, 0.27]},  # a line search: one forward episode per step
             {"phase": "codesign", "sample": 0, "t": 0, "k": 0, "error": "empty body"},
             {"phase": "codesign", "sample": 0, "final": True, "metric": 0.28},
             {"phase": "final", "metric": 0.3}]
     (cell / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
-    assert spending(cell) == [(5, 0.2), (10, 0.3), (14, 0.25), (19, 0.28), (20, 0.3)]
+    assert spending(cell) == [(5, 0.2), (10, 0.3), (14, 0.25), (18, 0.24), (19, 0.26),
+                              (21, 0.27), (26, 0.28), (27, 0.3)]
     grad = tmp_path / "cells" / "voxel-crawling-s0"
     grad.mkdir()
     (grad / "cell.json").write_text("{}")

@@ -54,6 +54,13 @@ def spending(folder: Path) -> list[tuple[float, float]]:
             r = {**r, "metric": r.get("max")}
         elif phase == "codesign":
             spent += 1 if r.get("final") else GRAD_COST
+            if r.get("metric") is not None:
+                pts.append((spent, float(r["metric"])))
+            for m in r.get("search") or []:  # the line search's forward episodes
+                spent += 1
+                if m is not None:
+                    pts.append((spent, float(m)))
+            continue
         elif phase == "final":
             spent += 1
         else:
