@@ -19,6 +19,8 @@ def prior_train(
     resume: bool = typer.Option(False, "--resume", help="continue from OUT/checkpoint.pt"),
     threads: int = typer.Option(None, min=1, help="torch threads (default 1)"),
     seed: int = typer.Option(None, help="seed (default 0)"),
+    corpus: int = typer.Option(None, help="corpus version: 1 (the shipped weights, default) "
+                               "or 2 (the attribute corpus)"),
 ) -> None:
     """Train a model of the prior on the procedural corpus; checkpoints and resumes."""
     from dbtool.prior.train import preset, resumed_config, train
@@ -31,7 +33,7 @@ def prior_train(
             if threads:
                 cfg.threads = threads
         else:
-            cfg = preset(kind, steps=steps, threads=threads, seed=seed)
+            cfg = preset(kind, steps=steps, threads=threads, seed=seed, corpus=corpus)
         result = train(cfg, out, resume=resume, cache_dir=out.parent / "corpus")
     typer.echo(f"trained {cfg.kind} for {result['steps']} steps ({result['elapsed_s']:.0f} s) "
                f"-> {out / 'checkpoint.pt'}")

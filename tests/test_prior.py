@@ -261,3 +261,22 @@ def test_chamfer_matrix_matches_the_definition():
             assert d[i, j].item() == pytest.approx(want.item(), rel=1e-4, abs=1e-7)
     assert torch.allclose(torch.diagonal(chamfer_matrix(a, a)), torch.zeros(3), atol=1e-6)
     assert one_nna(a, a + 10.0) == 1.0  # two far-apart sets are fully separable
+
+
+def test_training_on_the_attribute_corpus_caches_its_caption_embeddings(tmp_path):
+    from dbtool.prior import corpus as corpus_v2
+    from dbtool.prior.train import caption_embeddings, load_corpus
+
+    cfg = TrainConfig(kind="base", steps=2, batch=2, subset=16, per_family=1, ckpt_every=2,
+                      log_every=1, warmup=1, corpus=2, model=ModelConfig(**TINY))
+    cache = tmp_path / "corpus"
+    train(cfg, tmp_path / "run", cache_dir=cache, show_progress=False)
+    clouds, labels, table, _, _ = load_corpus(cfg, cache)
+    assert len(clouds) == len(corpus_v2.FAMILIES) and labels.max() == len(labels) - 1
+    chunks = sorted(cache.glob("captions-v2-*.npy"))
+    assert chunks and sorted(cache.glob("corpus-v2-*.npz"))
+    emb = caption_embeddings(cfg, table, cache)  # from the cache
+    assert emb.shape == (len(table), 384)
+    assert torch.allclose(emb[:3], text.encode(table[:3]), atol=1e-5)
+    with pytest.raises(ValueError, match="unknown corpus version"):
+        TrainConfig(corpus=3)

@@ -15,6 +15,7 @@ A run directory holds ``config.json``, ``manifest.json``, ``metrics.jsonl`` (the
 from __future__ import annotations
 
 import copy
+import hashlib
 import json
 import math
 import time
@@ -32,6 +33,7 @@ from dbtool.prior.schedulers import NoiseSchedule
 
 COARSE = 1024
 FINE = 4096
+CORPORA = (1, 2)
 
 
 @dataclass
@@ -48,6 +50,7 @@ class TrainConfig:
     weight_decay: float = 0.01
     ema: float = 0.999
     per_family: int = 300  # training shapes per family
+    corpus: int = 1  # 1: dbtool/prior/shapes.py (the shipped weights), 2: prior/corpus.py
     seed: int = 0
     threads: int = 1
     bf16: bool = True
@@ -61,12 +64,36 @@ class TrainConfig:
         if isinstance(self.model, dict):
             self.model = ModelConfig(**self.model)
         self.model.coarse = self.kind == "upsampler"
+        if self.corpus not in CORPORA:
+            raise ValueError(f"unknown corpus version {self.corpus}: "
+                             f"{' or '.join(map(str, CORPORA))}")
+
+
+def corpus_module(version: int):
+    """The module that builds corpus ``version`` (``FAMILIES``, ``make_corpus``)."""
+    from dbtool.prior import corpus
+
+    return {1: shapes, 2: corpus}[version]
+
+
+def source_digest(mod) -> str:
+    """A short hash of the code that builds a corpus (its module and the ones it imports from
+    ``dbtool.prior``), so a cached corpus is rebuilt when that code changes."""
+    import inspect
+
+    from dbtool.prior import bodies, composites, solids, words
+
+    mods = [mod] if mod is shapes else [mod, bodies, composites, solids, words]
+    src = "".join(inspect.getsource(m) for m in mods)
+    return hashlib.sha256(src.encode()).hexdigest()[:10]
 
 
 def preset(kind: str, **overrides) -> TrainConfig:
-    """The configuration the shipped weights were trained with (``MODEL_CARD.md``)."""
+    """The configuration the shipped weights were trained with (``MODEL_CARD.md``); on the
+    attribute corpus (``corpus=2``) the base model trains for 24,000 steps."""
     if kind == "base":
-        cfg = TrainConfig(kind="base", steps=14000, batch=32, subset=256, ckpt_every=500,
+        steps = 24000 if overrides.get("corpus") == 2 else 14000
+        cfg = TrainConfig(kind="base", steps=steps, batch=32, subset=256, ckpt_every=500,
                           model=ModelConfig(depth=6))
     elif kind == "upsampler":
         cfg = TrainConfig(kind="upsampler", steps=4000, batch=16, subset=256, ckpt_every=250)
@@ -100,13 +127,15 @@ def atomic_save(obj, path: Path) -> None:
 def load_corpus(cfg: TrainConfig, cache_dir: Path, progress=None):
     """Training clouds (4,096 points, float16), family labels, caption table and, per shape,
     the indices of its captions. Cached as ``.npz`` keyed by seed and size."""
-    path = cache_dir / f"corpus-seed{cfg.seed}-{cfg.per_family}x{len(shapes.FAMILIES)}.npz"
+    mod = corpus_module(cfg.corpus)
+    tag = "" if cfg.corpus == 1 else f"v{cfg.corpus}-{source_digest(mod)}-"
+    path = cache_dir / f"corpus-{tag}seed{cfg.seed}-{cfg.per_family}x{len(mod.FAMILIES)}.npz"
     if path.exists():
         d = np.load(path, allow_pickle=False)
         caps = [str(c) for c in d["captions"]]
         return d["clouds"], d["labels"], caps, list(d["cap_index"]), d["cap_count"]
-    clouds, labels, caps = shapes.make_corpus(cfg.per_family, "train", cfg.seed, FINE,
-                                              progress=progress)
+    clouds, labels, caps = mod.make_corpus(cfg.per_family, "train", cfg.seed, FINE,
+                                           progress=progress)
     table = sorted({c for cs in caps for c in cs})
     pos = {c: i for i, c in enumerate(table)}
     width = max(len(cs) for cs in caps)
@@ -118,6 +147,29 @@ def load_corpus(cfg: TrainConfig, cache_dir: Path, progress=None):
         tmp, clouds=clouds.astype(np.float16), labels=labels, captions=np.array(table),
         cap_index=cap_index, cap_count=cap_count))
     return clouds.astype(np.float16), labels, table, list(cap_index), cap_count
+
+
+def caption_embeddings(cfg: TrainConfig, table: list[str], cache_dir: Path,
+                       chunk: int = 4096) -> torch.Tensor:
+    """The text embeddings of the corpus's caption table. Corpus 2 has tens of thousands of
+    captions, so they are cached next to the corpus, chunk by chunk (an interrupted encoding
+    resumes)."""
+    if cfg.corpus == 1:
+        return text.encode(table)
+    from tqdm import tqdm
+
+    digest = hashlib.sha256("\n".join(table).encode()).hexdigest()[:10]
+    base = cache_dir / f"captions-v{cfg.corpus}-{digest}"
+    parts = []
+    for k in tqdm(range(0, len(table), chunk), desc="caption embeddings", unit="chunk"):
+        path = Path(f"{base}-{k // chunk:04d}.npy")
+        if path.exists():
+            parts.append(np.load(path))
+            continue
+        vecs = text.encode(table[k: k + chunk]).numpy().astype(np.float32)
+        atomic_write(path, lambda tmp, v=vecs: np.save(tmp, v))
+        parts.append(vecs)
+    return torch.from_numpy(np.concatenate(parts))
 
 
 def lr_at(cfg: TrainConfig, step: int) -> float:
@@ -162,7 +214,8 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path
     run = RunDir(run_dir, asdict(cfg), cfg.seed, "cpu")
     clouds, _labels, table, cap_index, cap_count = load_corpus(
         cfg, cache_dir or run.path.parent / "corpus")
-    emb = text.encode(table) if cfg.kind == "base" else None
+    emb = caption_embeddings(cfg, table, cache_dir or run.path.parent / "corpus") \
+        if cfg.kind == "base" else None
 
     torch.manual_seed(cfg.seed)
     model = PointDiffusionTransformer(cfg.model)
