@@ -114,7 +114,7 @@ def spring(rng):
 
 def crescent(rng):
     u = rng.uniform()
-    off = lerp(0.35, 0.12, u)
+    off = lerp(0.1, 0.35, u)
     solid = (Manifold.cylinder(0.2, 0.5, 0.5, 48, True)
              - Manifold.cylinder(0.4, 0.45, 0.45, 48, True).translate([off, 0.0, 0.0]))
     return solid, D(("crescent", "moon shape", "banana shape"), {"thickness": u},
@@ -160,11 +160,11 @@ def legged_disk(rng):
 
 
 def armed_ball(rng):
-    n, ul = int(rng.integers(3, 7)), rng.uniform()
-    arm = lerp(0.25, 0.8, ul)
+    n = int(rng.integers(3, 7))
+    arm = rng.uniform(0.25, 0.8)
     parts = [ball(0.25)] + [rod((0, 0, 0), (x * (0.25 + arm) / 0.22, y * (0.25 + arm) / 0.22,
                                             0.0), 0.06) for x, y in ring_xy(n, 0.22)]
-    return union(parts), D(("ball", "sphere", "hub"), {"length": ul}, {"arms": n},
+    return union(parts), D(("ball", "sphere", "hub"), {}, {"arms": n},
                            heldout_nouns=("globe",))
 
 
@@ -179,15 +179,15 @@ def fish(rng):
 
 
 def octopus(rng):
-    n, ul = int(rng.integers(5, 9)), rng.uniform()
-    arm = lerp(0.3, 0.9, ul)
+    n, uh = int(rng.integers(5, 9)), rng.uniform()
+    arm = lerp(0.3, 0.9, uh)
     parts = [ball(0.3, scale=(1.0, 1.0, 1.2))]
     for x, y in ring_xy(n, 0.2):
         mid = (x * 1.8, y * 1.8, -0.25 - arm / 2)
         end = (x * 2.6, y * 2.6, -0.25 - arm)
         parts += [rod((x, y, -0.15), mid, 0.05, 0.04), rod(mid, end, 0.04, 0.025),
                   ball(0.04, at=mid)]
-    return union(parts), D(("octopus", "squid", "jellyfish"), {"length": ul},
+    return union(parts), D(("octopus", "squid", "jellyfish"), {"height": uh},
                            {"tentacles": n}, heldout_nouns=("cephalopod",))
 
 
@@ -202,11 +202,11 @@ def mushroom(rng):
 
 
 def comb(rng):
-    n, ul = int(rng.integers(4, 9)), rng.uniform()
-    teeth = lerp(0.15, 0.8, ul)
+    n, uh = int(rng.integers(4, 9)), rng.uniform()
+    teeth = lerp(0.15, 0.8, uh)
     parts = [box(1.0, 0.1, 0.15)] + [rod((x, 0, -0.05), (x, 0, -0.05 - teeth), 0.03)
                                      for x in np.linspace(-0.45, 0.45, n)]
-    return union(parts), D(("comb", "rake", "row of teeth"), {"length": ul}, {"teeth": n},
+    return union(parts), D(("comb", "rake", "row of teeth"), {"height": uh}, {"teeth": n},
                            heldout_nouns=("brush",))
 
 
@@ -221,15 +221,15 @@ def fork(rng):
 
 
 def gripper(rng):
-    n, uh, uc = int(rng.integers(2, 4)), rng.uniform(), rng.uniform()
-    length, bend = lerp(0.3, 0.9, uh), lerp(0.0, 0.25, uc)
+    n, uh = int(rng.integers(2, 4)), rng.uniform()
+    length, bend = lerp(0.3, 0.9, uh), rng.uniform(0.0, 0.25)
     parts = [Manifold.cylinder(0.1, 0.35, 0.35, 40, True)]
     for x, y in ring_xy(n, 0.22):
         mid = (x, y, -0.05 - length / 2)
         end = (x * (1 - bend * 4), y * (1 - bend * 4), -0.05 - length)
         parts += [rod((x, y, 0.0), mid, 0.06), rod(mid, end, 0.06, 0.045), ball(0.06, at=mid)]
     return union(parts), D(("gripper", "claw with fingers", "robot hand"),
-                           {"height": uh, "curve": uc}, {"fingers": n},
+                           {"height": uh}, {"fingers": n},
                            heldout_nouns=("grabber",))
 
 

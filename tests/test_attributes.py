@@ -1,0 +1,32 @@
+"""The geometric attribute measurements agree with the corpus's own drawn parameters."""
+
+from __future__ import annotations
+
+import pytest
+
+from dbtool.prior.attributes import MEASURES, legs
+from dbtool.prior.corpus import make_shape
+from dbtool.prior.words import LOW
+
+CASES = [("disk", "thickness"), ("cylinder", "height"), ("egg", "length"), ("plate", "width"),
+         ("bar", "roundness"), ("finger", "taper"), ("worm", "curve"), ("ring", "thickness")]
+
+
+@pytest.mark.parametrize(("family", "attr"), CASES)
+def test_the_high_word_measures_higher_than_the_low_word(family, attr):
+    shapes = [make_shape(family, i, "reference", 0, 1024) for i in range(12)]
+    # an attribute without a low word ("tapered") is compared with the shapes drawn low
+    lo = [MEASURES[attr](s.points) for s in shapes if s.description.words().get(attr) == "low"
+          or (attr == "taper" and s.description.grades[attr] < LOW)]
+    hi = [MEASURES[attr](s.points) for s in shapes if s.description.words().get(attr) == "high"]
+    assert lo and hi, "the draw has both ends"
+    right = sum(a < b for a in lo for b in hi) / (len(lo) * len(hi))
+    assert right >= 0.85, right
+
+
+def test_legs_are_counted_on_the_ground():
+    shapes = [make_shape(f, i, "reference", 0, 1024) for f in ("legged_ball", "legged_disk")
+              for i in range(6)]
+    right = sum(legs(s.points) == s.description.counts["legs"] for s in shapes)
+    assert right >= 10, right
+    assert legs(make_shape("block", 0, "reference", 0, 1024).points) == 1
