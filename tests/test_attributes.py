@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from dbtool.prior.attributes import MEASURES, legs
+from dbtool.attributes import MEASURES, legs
 from dbtool.prior.corpus import make_shape
 from dbtool.prior.words import LOW
 

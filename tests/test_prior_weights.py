@@ -96,3 +96,14 @@ def test_generate_bad_input_is_one_line(tmp_path, args, message):
     assert len(errors) == 1 and message in errors[0], out.stderr
     assert "Traceback" not in out.stderr
     assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
+def test_weights_folders_are_versioned():
+    from dbtool.prior.pipeline import DEFAULT_VERSION, weights_dir
+
+    assert weights_dir(1) == BASE_WEIGHTS.parent or DEFAULT_VERSION != 1
+    assert (weights_dir(1) / "base.pt").is_file() and (weights_dir(1) / "eval.json").is_file()
+    with pytest.raises(CheckpointError, match="no shipped prior version 99; shipped: v1"):
+        weights_dir(99)
+    with pytest.raises(CheckpointError, match="version 99"):
+        Prior.load(version=99)

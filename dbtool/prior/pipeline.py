@@ -22,7 +22,22 @@ from dbtool.prior.diffusion import SCALE, EpsModel, Step, denoise
 from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
 from dbtool.prior.schedulers import DDIMScheduler, DDPMScheduler, NoiseSchedule, Scheduler
 
-WEIGHTS = Path(__file__).parent / "weights"
+WEIGHTS_ROOT = Path(__file__).parent / "weights"
+DEFAULT_VERSION = 1  # the shipped prior; every version keeps its folder weights/vN
+
+
+def weights_dir(version: int = DEFAULT_VERSION) -> Path:
+    """The folder of the shipped weights of prior ``version`` (base.pt, upsampler.pt,
+    eval.json)."""
+    path = WEIGHTS_ROOT / f"v{version}"
+    if not path.is_dir():
+        known = sorted(p.name for p in WEIGHTS_ROOT.glob("v*") if p.is_dir())
+        raise CheckpointError(f"no shipped prior version {version}; shipped: "
+                              f"{', '.join(known) or 'none'}")
+    return path
+
+
+WEIGHTS = WEIGHTS_ROOT / f"v{DEFAULT_VERSION}"
 BASE_WEIGHTS = WEIGHTS / "base.pt"
 UPSAMPLER_WEIGHTS = WEIGHTS / "upsampler.pt"
 COARSE_POINTS = 1024
@@ -93,14 +108,16 @@ class Prior:
 
     @classmethod
     def load(cls, base: str | Path | None = None, upsampler: str | Path | None = None,
-             with_upsampler: bool = True, **schedulers: Scheduler) -> Prior:
-        """The shipped weights (default) or the given files; the upsampler is loaded when
-        ``with_upsampler`` or a path is given. ``schedulers``: ``scheduler`` and/or
-        ``up_scheduler`` (see :class:`Prior`)."""
-        model, _ = load_model(base or BASE_WEIGHTS, "base")
+             with_upsampler: bool = True, version: int | None = None,
+             **schedulers: Scheduler) -> Prior:
+        """The shipped weights of ``version`` (default: ``DEFAULT_VERSION``) or the given
+        files; the upsampler is loaded when ``with_upsampler`` or a path is given.
+        ``schedulers``: ``scheduler`` and/or ``up_scheduler`` (see :class:`Prior`)."""
+        folder = weights_dir(version) if version is not None else WEIGHTS
+        model, _ = load_model(base or folder / "base.pt", "base")
         up = None
         if with_upsampler or upsampler is not None:
-            up, _ = load_model(upsampler or UPSAMPLER_WEIGHTS, "upsampler")
+            up, _ = load_model(upsampler or folder / "upsampler.pt", "upsampler")
         return cls(model, up, **schedulers)
 
     # ------------------------------------------------------------------ conditions
