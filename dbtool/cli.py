@@ -166,7 +166,7 @@ def generate(
                                                       "runs/generate-TIME)"),
 ) -> None:
     """Sample point clouds from the prior: .ply per sample, samples.npz and grid.png."""
-    from dbtool.prior.generate import GenerateSettings, check_prompts
+    from dbtool.prior.generate import GenerateSettings, check_prompts, far_prompt_note
     from dbtool.prior.generate import generate as run_generate
     from dbtool.prior.pipeline import Prior
     from dbtool.runs import default_run_dir
@@ -175,6 +175,8 @@ def generate(
     out = out or default_run_dir("generate")
     with guarded(RuntimeError):
         check_prompts(prompts)
+        for note in filter(None, map(far_prompt_note, prompts)):
+            typer.echo(note, err=True)
         prior = Prior.load(base, upsampler if upsample else None, with_upsampler=upsample)
         summary = run_generate(prior, prompts, settings, out)
     typer.echo(f"{len(prompts) * n} clouds of {summary['points']} points in "

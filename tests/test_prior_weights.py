@@ -107,3 +107,13 @@ def test_weights_folders_are_versioned():
         weights_dir(99)
     with pytest.raises(CheckpointError, match="version 99"):
         Prior.load(version=99)
+
+
+def test_a_far_prompt_names_the_nearest_known_captions():
+    from dbtool.prior.generate import KNOWN, far_prompt_note, nearest_captions
+
+    assert far_prompt_note("a star") is None  # a training caption
+    near = nearest_captions("a teapot")
+    assert len(near) == 3 and near[0][1] < KNOWN and near[0][1] >= near[2][1]
+    note = far_prompt_note("a teapot")
+    assert note.startswith("note: 'a teapot' is far") and repr(near[0][0]) in note

@@ -8,12 +8,14 @@ The files of one call land in one folder: ``PROMPT_SLUG-k.ply`` per sample (the 
 
 from __future__ import annotations
 
+import functools
 import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from dbtool.pointcloud import save_npz, save_ply
 from dbtool.prior.pipeline import Prior
@@ -79,3 +81,39 @@ def generate(prior: Prior, prompts: list[str], settings: GenerateSettings, out: 
                "points": int(clouds.shape[1]), "files": [str(f) for f in files]}
     write_json(out / "generate.json", summary)
     return summary
+
+
+KNOWN = 0.7  # a prompt whose best cosine similarity to a corpus caption is below this is "far"
+
+
+@functools.lru_cache(maxsize=2)
+def known_captions(version: int = 1) -> tuple[list[str], torch.Tensor]:
+    """The captions the prior of ``version`` was trained on (three draws per family, which
+    covers every name and template) and their embeddings."""
+    from dbtool.prior import corpus, shapes, text
+
+    mod = shapes if version == 1 else corpus
+    caps = sorted({c for f in mod.FAMILIES for i in range(3)
+                   for c in mod.make_shape(f, i, "train", 0, 16).captions})
+    return caps, text.encode(caps)
+
+
+def nearest_captions(prompt: str, k: int = 3, version: int = 1) -> list[tuple[str, float]]:
+    """The ``k`` known captions closest to ``prompt`` (cosine similarity of the embeddings)."""
+    from dbtool.prior import text
+
+    caps, emb = known_captions(version)
+    sim = (text.encode(prompt) @ emb.T)[0]
+    vals, idx = sim.topk(min(k, len(caps)))
+    return [(caps[int(i)], float(v)) for v, i in zip(vals, idx, strict=True)]
+
+
+def far_prompt_note(prompt: str, version: int = 1) -> str | None:
+    """A one-line note when ``prompt`` is far from every caption the prior knows: what it
+    will most likely draw instead (docs/prior.md)."""
+    near = nearest_captions(prompt, 3, version)
+    if near[0][1] >= KNOWN:
+        return None
+    listed = ", ".join(f"{c!r} ({s:.2f})" for c, s in near)
+    return (f"note: {prompt!r} is far from every caption the prior was trained on (best "
+            f"similarity {near[0][1]:.2f} < {KNOWN}); nearest known captions: {listed}")

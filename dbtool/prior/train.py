@@ -51,6 +51,7 @@ class TrainConfig:
     ema: float = 0.999
     per_family: int = 300  # training shapes per family
     corpus: int = 1  # 1: dbtool/prior/shapes.py (the shipped weights), 2: prior/corpus.py
+    corpus_digest: str = ""  # hash of the corpus code the run started with (set by train)
     seed: int = 0
     threads: int = 1
     bf16: bool = True
@@ -204,13 +205,20 @@ def schedule_for(kind: str) -> NoiseSchedule:
 
 def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path | None = None,
           show_progress: bool = True) -> dict:
-    """Train (or resume) one model; returns the final metrics. ``show_progress``: a tqdm bar."""
+    """Train (or resume) one model; returns the final metrics. ``show_progress``: a tqdm bar.
+    Records the corpus code's hash in ``cfg`` and refuses to resume on changed corpus code."""
     from dbtool.runs import RunDir, write_json
 
     torch.set_num_threads(max(1, cfg.threads))
     ckpt_path = Path(run_dir) / "checkpoint.pt"
     if ckpt_path.exists() and not resume:
         raise FileExistsError(f"{ckpt_path} exists: pass --resume or choose another --out")
+    digest = source_digest(corpus_module(cfg.corpus))
+    if cfg.corpus_digest and cfg.corpus_digest != digest:
+        raise ValueError(f"the corpus code changed since {run_dir} started (corpus "
+                         f"{cfg.corpus_digest}, now {digest}); a resumed run would train on "
+                         "other shapes: start a new run")
+    cfg.corpus_digest = digest  # kept in the checkpoint's config
     run = RunDir(run_dir, asdict(cfg), cfg.seed, "cpu")
     clouds, _labels, table, cap_index, cap_count = load_corpus(
         cfg, cache_dir or run.path.parent / "corpus")
