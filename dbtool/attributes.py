@@ -121,3 +121,57 @@ def legs(points: np.ndarray, band: float = 0.06, link: float = 0.1) -> int:
 MEASURES: dict[str, Measure] = {"thickness": thickness, "length": length, "height": height,
                                 "width": width, "roundness": roundness, "taper": taper,
                                 "curve": curve}
+
+
+# --------------------------------------------------------------------------- control
+def attribute_prompts(families: list[str] | None = None) -> list[dict]:
+    """For every graded attribute of every family of the attribute corpus: the prompt with
+    its low word and the one with its high word (an attribute without a low word, "tapered",
+    is compared with the plain noun phrase), with the family's part count of shape 0."""
+    from dbtool.prior import corpus
+    from dbtool.prior.words import ADJECTIVES, NUMBERS, WITH, noun_phrase
+
+    rows = []
+    for fam in families or list(corpus.FAMILIES):
+        d = corpus.make_shape(fam, 0, "reference", 0, 16).description
+        count = None
+        if d.counts:
+            part, k = next(iter(d.counts.items()))
+            count = WITH[0].format(n=NUMBERS[k], part=part)
+        for attr in d.grades:
+            low, high = ADJECTIVES[attr]
+            rows.append({"family": fam, "attribute": attr,
+                         "low": noun_phrase(d.nouns[0], list(low[:1]), count)[0],
+                         "high": noun_phrase(d.nouns[0], [high[0]], count)[0]})
+    return rows
+
+
+def attribute_control(prior, rows: list[dict], n: int = 4, seed: int = 0, steps: int = 32,
+                      guidance: float = 3.0) -> list[dict]:
+    """Sample ``n`` clouds of each row's low and high prompt from the same noise and measure
+    the attribute: a pair is right when the high prompt's cloud measures higher."""
+    out = []
+    for r in rows:
+        lo = prior.sample(r["low"], n=n, guidance=guidance, steps=steps, seed=seed).clouds
+        hi = prior.sample(r["high"], n=n, guidance=guidance, steps=steps, seed=seed).clouds
+        m = MEASURES[r["attribute"]]
+        ml, mh = [m(c) for c in lo], [m(c) for c in hi]
+        out.append({**r, "low_values": ml, "high_values": mh,
+                    "right": int(sum(b > a for a, b in zip(ml, mh, strict=True))), "pairs": n})
+    return out
+
+
+def legs_control(prior, bodies=("block", "ball", "disk"), counts=(3, 4, 6), n: int = 4,
+                 seed: int = 0, steps: int = 32, guidance: float = 3.0) -> list[dict]:
+    """"a BODY with N legs": how many of ``n`` samples stand on exactly N separate contacts."""
+    from dbtool.prior.words import NUMBERS
+
+    out = []
+    for body in bodies:
+        for k in counts:
+            prompt = f"a {body} with {NUMBERS[k]} legs"
+            clouds = prior.sample(prompt, n=n, guidance=guidance, steps=steps, seed=seed).clouds
+            found = [legs(c) for c in clouds]
+            out.append({"prompt": prompt, "legs": k, "found": found,
+                        "right": int(sum(f == k for f in found)), "samples": n})
+    return out

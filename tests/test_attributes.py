@@ -30,3 +30,20 @@ def test_legs_are_counted_on_the_ground():
     right = sum(legs(s.points) == s.description.counts["legs"] for s in shapes)
     assert right >= 10, right
     assert legs(make_shape("block", 0, "reference", 0, 1024).points) == 1
+
+
+def test_attribute_control_runs_on_a_prior():
+    from dbtool.attributes import attribute_control, attribute_prompts, legs_control
+    from dbtool.prior.pipeline import Prior
+
+    rows = attribute_prompts(["disk", "finger", "legged_ball"])
+    assert {"family": "disk", "attribute": "thickness", "low": "a thin disk",
+            "high": "a thick disk"} in rows
+    assert any(r["low"] == "a finger with three segments" for r in rows)  # no low word: plain
+    assert all("legs" in r["low"] for r in rows if r["family"] == "legged_ball")
+    prior = Prior.load(with_upsampler=False)
+    res = attribute_control(prior, rows[:1], n=2, steps=8)
+    assert res[0]["pairs"] == 2 and 0 <= res[0]["right"] <= 2
+    assert len(res[0]["low_values"]) == 2 and all(v > 0 for v in res[0]["high_values"])
+    leg = legs_control(prior, bodies=("ball",), counts=(4,), n=2, steps=8)
+    assert leg[0]["prompt"] == "a ball with four legs" and len(leg[0]["found"]) == 2
