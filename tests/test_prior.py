@@ -246,6 +246,19 @@ def test_evaluation_runs_every_part():
     for it in res["interpolations"]:
         assert [r["u"] for r in it["path"]] == pytest.approx(np.linspace(0, 1, 7))
         assert all(0 <= r["share_a"] + r["share_b"] <= 1 for r in it["path"])
+        assert 0 <= it["intermediate"] <= 1 and 0 <= it["largest_jump"] <= 1
+
+
+def test_gradualness_tells_a_jump_from_a_blend():
+    from dbtool.prior.evaluate import gradualness
+
+    gen = torch.Generator().manual_seed(0)
+    a = torch.rand(3, 64, 3, generator=gen) * torch.tensor([1.0, 0.2, 0.2])  # bars
+    b = torch.rand(3, 64, 3, generator=gen) * torch.tensor([0.2, 0.2, 1.0])
+    jump = gradualness([a, a, a, b, b])
+    blend = gradualness([a + 0 * u + (b - a) * u for u in np.linspace(0, 1, 5)])
+    assert jump["intermediate"] == 0 and jump["largest_jump"] == pytest.approx(1.0)
+    assert blend["intermediate"] == 1 and blend["largest_jump"] == pytest.approx(0.25, abs=0.02)
 
 
 def test_chamfer_matrix_matches_the_definition():

@@ -146,7 +146,7 @@ def interpolation(prior: Prior, fam_a: str, fam_b: str, ref, ref_lab, steps: int
     ea, eb = prior.embed([a, b])
     fa, fb = family_index(fam_a), family_index(fam_b)
     sched = scheduler_for(eta, prior.scheduler.schedule)
-    rows = []
+    rows, path = [], []
     for u in np.linspace(0, 1, n):
         e = slerp(ea, eb, float(u))
         g = subsample(prior.sample(embedding=e, n=samples, guidance=guidance, steps=steps,
@@ -154,4 +154,28 @@ def interpolation(prior: Prior, fam_a: str, fam_b: str, ref, ref_lab, steps: int
         nn = ref_lab[chamfer_matrix(g, ref).argmin(1).numpy()]
         rows.append({"u": float(u), "share_a": float((nn == fa).mean()),
                      "share_b": float((nn == fb).mean())})
-    return {"a": a, "b": b, "path": rows}
+        path.append(g)
+    return {"a": a, "b": b, "path": rows, **gradualness(path)}
+
+
+def gradualness(path: list[torch.Tensor]) -> dict:
+    """How gradual a slerp path is. ``path[i]``: the ``(S, P, 3)`` clouds of step ``i``, sample
+    ``j`` of every step from the same noise, so each ``j`` is one path.
+
+    A step belongs to an end when its Chamfer distance to that end's sample ``j`` is below the
+    end's own spread (the median distance between its ``S`` samples); ``intermediate``: the
+    share of paths with a step between the ends that belongs to neither. ``largest_jump``: per
+    path, the largest share of the total change of the bounding-box extents made in one step
+    (``1 / (n - 1)`` when even, 1 for a single jump), averaged."""
+    def spread_of(c: torch.Tensor) -> float:
+        d = chamfer_matrix(c, c)
+        return float(d[~torch.eye(len(c), dtype=torch.bool)].median())
+
+    ta, tb = spread_of(path[0]), spread_of(path[-1])
+    da = torch.stack([torch.diagonal(chamfer_matrix(c, path[0])) for c in path[1:-1]])
+    db = torch.stack([torch.diagonal(chamfer_matrix(c, path[-1])) for c in path[1:-1]])
+    neither = ((da > ta) & (db > tb)).any(0)
+    ext = np.stack([(c.amax(1) - c.amin(1)).numpy() for c in path])  # (n, S, 3)
+    steps = np.linalg.norm(np.diff(ext, axis=0), axis=2)  # (n - 1, S)
+    jump = steps.max(0) / np.maximum(steps.sum(0), 1e-12)
+    return {"intermediate": float(neither.float().mean()), "largest_jump": float(jump.mean())}
