@@ -298,3 +298,17 @@ def test_training_on_the_attribute_corpus_caches_its_caption_embeddings(tmp_path
     changed.corpus_digest = "0123456789"
     with pytest.raises(ValueError, match="corpus code changed"):
         train(changed, tmp_path / "run", resume=True, cache_dir=cache, show_progress=False)
+
+
+def test_evaluation_on_the_attribute_corpus():
+    from dbtool.prior.evaluate import evaluate, prompt_of
+
+    assert prompt_of("legged_block", 2) == "a block with four legs"  # "block" is shared
+    assert prompt_of("finger", 2) == "a finger"
+    prior = Prior.load(with_upsampler=False)
+    res = evaluate(prior, ["legged_block"], samples=2, steps=4, paraphrases=False,
+                   interpolate=False, log=None, reference_families=["block", "legged_block"],
+                   heldout_per_family=2, metric_points=64, version=2)
+    fam = res["families"]["legged_block"]
+    assert res["settings"]["corpus"] == 2 and fam["prompt"] == "a block with four legs"
+    assert 0 <= fam["accuracy"] <= 1 and 0 <= fam["ceiling"] <= 1

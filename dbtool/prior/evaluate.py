@@ -39,19 +39,40 @@ PARAPHRASES: dict[str, tuple[str, ...]] = {
 INTERPOLATIONS = (("ball", "star"), ("bar", "ring"), ("table", "pyramid"))  # family pairs
 
 
+def corpus_of(version: int):
+    """The module of corpus ``version`` (1: ``shapes``, 2: ``corpus``)."""
+    from dbtool.prior.train import corpus_module
+
+    return corpus_module(version)
+
+
 def real_set(split: str, per_family: int, families: list[str], seed: int = 0,
-             points: int = METRIC_POINTS) -> tuple[torch.Tensor, np.ndarray]:
-    clouds, labels, _ = shapes.make_corpus(per_family, split, seed, 1024, families)
+             points: int = METRIC_POINTS, version: int = 1) -> tuple[torch.Tensor, np.ndarray]:
+    clouds, labels, _ = corpus_of(version).make_corpus(per_family, split, seed, 1024, families)
     return subsample(clouds, points, seed=1), labels
 
 
-def family_index(name: str) -> int:
-    return list(shapes.FAMILIES).index(name)
+def family_index(name: str, version: int = 1) -> int:
+    return list(corpus_of(version).FAMILIES).index(name)
 
 
-def prompt_of(family: str) -> str:
+def prompt_of(family: str, version: int = 1) -> str:
     """The caption a family is prompted with: its first name without a thin/thick adjective,
-    in the first template (``"a bar"``, ``"a star"``, ``"a pair of wings"``)."""
+    in the first template (``"a bar"``, ``"a star"``, ``"a pair of wings"``); on corpus 2 its
+    first noun, with the part count of shape 0 where another family has the same noun
+    (``"a block with four legs"``)."""
+    if version != 1:
+        from dbtool.prior.words import NUMBERS, WITH, noun_phrase
+
+        mod = corpus_of(version)
+        d = mod.make_shape(family, 0, "test", n_points=16).description
+        shared = sum(mod.make_shape(f, 0, "test", n_points=16).description.nouns[0]
+                     == d.nouns[0] for f in mod.FAMILIES) > 1
+        count = None
+        if d.counts and shared:
+            part, k = next(iter(d.counts.items()))
+            count = WITH[0].format(n=NUMBERS[k], part=part)
+        return noun_phrase(d.nouns[0], [], count)[0]
     name = shapes.make_shape(family, 0, "test", n_points=16).captions[0]
     for adjective in ("thin ", "thick "):
         name = name.replace(adjective, "")
@@ -63,38 +84,41 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
              interpolate: bool = True, log: Callable[[str], object] | None = print,
              reference_families: list[str] | None = None, eta: float = 1.0,
              heldout_per_family: int = HELDOUT_PER_FAMILY,
-             metric_points: int = METRIC_POINTS) -> dict:
+             metric_points: int = METRIC_POINTS, version: int = 1) -> dict:
     """All quality metrics of the model card; numbers per family and overall.
 
     ``families`` are the families prompted; the reference set covers ``reference_families``
     (default: every family), so a sample can be mistaken for any of them. The ceiling is the
     same 1-NN rule applied to real held-out shapes of the prompted families.
     """
-    fams = families or list(shapes.FAMILIES)
-    ref_fams = reference_families or list(shapes.FAMILIES)
+    all_fams = list(corpus_of(version).FAMILIES)
+    fams = families or all_fams
+    ref_fams = reference_families or all_fams
     missing = set(fams) - set(ref_fams)
     if missing:
         raise ValueError(f"families without references: {', '.join(sorted(missing))}")
     t0 = time.perf_counter()
-    ref, ref_lab = real_set("reference", REF_PER_FAMILY, ref_fams, points=metric_points)
-    held, held_lab = real_set("heldout", heldout_per_family, fams, points=metric_points)
+    ref, ref_lab = real_set("reference", REF_PER_FAMILY, ref_fams, points=metric_points,
+                            version=version)
+    held, held_lab = real_set("heldout", heldout_per_family, fams, points=metric_points,
+                              version=version)
     ceiling = one_nn_accuracy(chamfer_matrix(held, ref), held_lab, ref_lab)
     res: dict = {"families": {}, "settings": {
         "samples": samples, "steps": steps, "guidance": guidance, "seed": seed, "eta": eta,
         "reference_per_family": REF_PER_FAMILY, "heldout_per_family": heldout_per_family,
-        "metric_points": metric_points}}
+        "metric_points": metric_points, "corpus": version}}
     sched = scheduler_for(eta, prior.scheduler.schedule)
     accs = []
     for k, fam in enumerate(fams):
-        prompt = prompt_of(fam)
+        prompt = prompt_of(fam, version)
         gen = prior.sample(prompt, samples, guidance, steps, seed + k, scheduler=sched).clouds
         g = subsample(gen, metric_points, seed=2)
-        acc = one_nn_accuracy(chamfer_matrix(g, ref), np.full(samples, family_index(fam)),
+        acc = one_nn_accuracy(chamfer_matrix(g, ref), np.full(samples, family_index(fam, version)),
                               ref_lab)
-        real = held[held_lab == family_index(fam)]
+        real = held[held_lab == family_index(fam, version)]
         res["families"][fam] = {
             "prompt": prompt, "accuracy": float(acc.mean()),
-            "ceiling": float(ceiling[held_lab == family_index(fam)].mean()),
+            "ceiling": float(ceiling[held_lab == family_index(fam, version)].mean()),
             "one_nna": one_nna(g, real), "spread_ratio": spread(g) / max(spread(real), 1e-12),
             "extent_ratio": float(np.ptp(gen, 1).max(1).mean()),
         }
@@ -115,7 +139,7 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
                                        scheduler=sched).clouds,
                           metric_points, seed=2)
             nn = ref_lab[chamfer_matrix(g, ref).argmin(1).numpy()]
-            hit = np.isin(nn, [family_index(f) for f in ok])
+            hit = np.isin(nn, [family_index(f, version) for f in ok])
             para[prompt] = {"families": list(ok), "accuracy": float(hit.mean())}
             if log is not None:
                 log(f"{prompt!r}: {hit.mean():.2f}")
@@ -123,7 +147,7 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
         res["paraphrase_accuracy"] = float(np.mean([p["accuracy"] for p in para.values()]))
     if interpolate:
         res["interpolations"] = [interpolation(prior, a, b, ref, ref_lab, steps, guidance, seed,
-                                               eta=eta)
+                                               eta=eta, version=version)
                                  for a, b in INTERPOLATIONS if {a, b} <= set(ref_fams)]
     res["seconds"] = time.perf_counter() - t0
     return res
@@ -139,12 +163,12 @@ def slerp(a: torch.Tensor, b: torch.Tensor, u: float) -> torch.Tensor:
 
 def interpolation(prior: Prior, fam_a: str, fam_b: str, ref, ref_lab, steps: int,
                   guidance: float, seed: int, n: int = 7, samples: int = 8,
-                  eta: float = 1.0) -> dict:
+                  eta: float = 1.0, version: int = 1) -> dict:
     """Share of samples whose nearest reference is family A or B along the slerp between the
     embeddings of their prompts."""
-    a, b = prompt_of(fam_a), prompt_of(fam_b)
+    a, b = prompt_of(fam_a, version), prompt_of(fam_b, version)
     ea, eb = prior.embed([a, b])
-    fa, fb = family_index(fam_a), family_index(fam_b)
+    fa, fb = family_index(fam_a, version), family_index(fam_b, version)
     sched = scheduler_for(eta, prior.scheduler.schedule)
     rows, path = [], []
     for u in np.linspace(0, 1, n):
