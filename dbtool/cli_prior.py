@@ -60,6 +60,8 @@ def prior_evaluate(
     guidance: float = typer.Option(3.0, help="guidance scale"),
     families: list[str] = typer.Option(None, "--family", help="only these families"),
     out: Path = typer.Option(Path("runs/prior/eval.json"), help="metrics JSON"),
+    corpus: int = typer.Option(1, help="the corpus whose families and references are used: "
+                               "1 or 2 (the attribute corpus)"),
 ) -> None:
     """Prompt fidelity (1-NN Chamfer), its ceiling, paraphrases, diversity, interpolation."""
     from dbtool.prior.evaluate import evaluate
@@ -68,7 +70,10 @@ def prior_evaluate(
 
     with guarded():
         prior = Prior.load(base, with_upsampler=False)
-        res = evaluate(prior, families or None, samples, steps, guidance, log=typer.echo)
+        if corpus not in (1, 2):
+            raise ValueError(f"unknown corpus version {corpus}: 1 or 2")
+        res = evaluate(prior, families or None, samples, steps, guidance, log=typer.echo,
+                       version=corpus)
         write_json(out, res)
     typer.echo(f"accuracy {res['accuracy']:.3f} (lowest family {res['min_accuracy']:.2f}, "
                f"ceiling {res['ceiling']:.3f}) -> {out}")
