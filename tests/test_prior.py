@@ -306,9 +306,12 @@ def test_evaluation_on_the_attribute_corpus():
     assert prompt_of("legged_block", 2) == "a block with four legs"  # "block" is shared
     assert prompt_of("finger", 2) == "a finger"
     prior = Prior.load(with_upsampler=False)
-    res = evaluate(prior, ["legged_block"], samples=2, steps=4, paraphrases=False,
+    res = evaluate(prior, ["legged_block"], samples=2, steps=4, paraphrases=True,
                    interpolate=False, log=None, reference_families=["block", "legged_block"],
                    heldout_per_family=2, metric_points=64, version=2)
     fam = res["families"]["legged_block"]
+    assert len(res["heldout_paraphrases"]) == 2  # two held-out phrasings of the family
+    assert all(p["family"] == "legged_block" for p in res["heldout_paraphrases"].values())
+    assert 0 <= res["heldout_paraphrase_accuracy"] <= 1
     assert res["settings"]["corpus"] == 2 and fam["prompt"] == "a block with four legs"
     assert 0 <= fam["accuracy"] <= 1 and 0 <= fam["ceiling"] <= 1

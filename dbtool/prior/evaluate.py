@@ -144,13 +144,40 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
             if log is not None:
                 log(f"{prompt!r}: {hit.mean():.2f}")
         res["paraphrases"] = para
-        res["paraphrase_accuracy"] = float(np.mean([p["accuracy"] for p in para.values()]))
+        res["paraphrase_accuracy"] = (float(np.mean([p["accuracy"] for p in para.values()]))
+                                      if para else None)
+    if paraphrases and version != 1:
+        held_para = {}
+        for k, fam in enumerate(fams):
+            for j, prompt in enumerate(heldout_prompts(fam, version)):
+                g = subsample(prior.sample(prompt, max(2, samples // 4), guidance, steps,
+                                           seed + 200 + 2 * k + j, scheduler=sched).clouds,
+                              metric_points, seed=2)
+                nn = ref_lab[chamfer_matrix(g, ref).argmin(1).numpy()]
+                held_para[prompt] = {"family": fam, "accuracy": float(
+                    (nn == family_index(fam, version)).mean())}
+        res["heldout_paraphrases"] = held_para
+        res["heldout_paraphrase_accuracy"] = float(np.mean(
+            [p["accuracy"] for p in held_para.values()]))
     if interpolate:
         res["interpolations"] = [interpolation(prior, a, b, ref, ref_lab, steps, guidance, seed,
                                                eta=eta, version=version)
                                  for a, b in INTERPOLATIONS if {a, b} <= set(ref_fams)]
     res["seconds"] = time.perf_counter() - t0
     return res
+
+
+def heldout_prompts(family: str, version: int = 2, n: int = 2) -> list[str]:
+    """``n`` captions of ``family`` in phrasings training never saw (the ``heldout`` split's
+    templates, synonyms, nouns and attribute pairs of the attribute corpus)."""
+    out: list[str] = []
+    for i in range(20):
+        for c in corpus_of(version).make_shape(family, i, "heldout", n_points=16).captions[1:]:
+            if c not in out:
+                out.append(c)
+            if len(out) == n:
+                return out
+    return out
 
 
 def slerp(a: torch.Tensor, b: torch.Tensor, u: float) -> torch.Tensor:
