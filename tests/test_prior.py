@@ -296,7 +296,7 @@ def test_training_on_the_attribute_corpus_caches_its_caption_embeddings(tmp_path
     changed = resumed_config(tmp_path / "run", 4)
     assert changed.corpus_digest == cfg.corpus_digest != ""
     changed.corpus_digest = "0123456789"
-    with pytest.raises(ValueError, match="corpus code changed"):
+    with pytest.raises(ValueError, match="corpus changed"):
         train(changed, tmp_path / "run", resume=True, cache_dir=cache, show_progress=False)
 
 

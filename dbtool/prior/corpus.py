@@ -14,11 +14,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import trimesh
 
 from dbtool.prior import bodies, composites
-from dbtool.prior.shapes import SPLITS, Shape
-from dbtool.prior.solids import normalise, to_trimesh
+from dbtool.prior.shapes import SPLITS, Shape, collect, surface_sample
 from dbtool.prior.words import Description, captions
 
 VERSION = 2
@@ -70,29 +68,13 @@ def make_shape(family: str, index: int, split: str = "train", seed: int = 0,
     rng = np.random.default_rng((seed, SPLITS[split], VERSION, list(FAMILIES).index(family),
                                  index))
     solid, desc = FAMILIES[family](rng)
-    solid = solid.rotate([-90.0, 0.0, 0.0])  # z-up construction -> y-up
-    if solid.is_empty():
-        raise RuntimeError(f"shape family {family!r} built an empty solid")
-    mesh = to_trimesh(solid)
-    pts, _ = trimesh.sample.sample_surface(mesh, n_points, seed=int(rng.integers(2**31)))
-    pts = np.asarray(pts)
-    mesh = trimesh.Trimesh(normalise(np.asarray(mesh.vertices), pts), mesh.faces,
-                           process=False)
+    pts, mesh = surface_sample(family, solid, rng, n_points)
     caps = captions(desc, rng, n_captions, split)
-    return AttributeShape(family, caps, normalise(pts).astype(np.float32), mesh, desc)
+    return AttributeShape(family, caps, pts, mesh, desc)
 
 
 def make_corpus(per_family: int, split: str = "train", seed: int = 0, n_points: int = 1024,
                 families: list[str] | None = None, progress=None):
     """Clouds ``(F * per_family, n, 3)``, family indices and per-shape caption lists."""
-    fams = families or list(FAMILIES)
-    clouds, labels, caps = [], [], []
-    for f in fams:
-        for i in range(per_family):
-            s = make_shape(f, i, split, seed, n_points)
-            clouds.append(s.points)
-            labels.append(list(FAMILIES).index(f))
-            caps.append(s.captions)
-            if progress is not None:
-                progress(1)
-    return np.stack(clouds), np.asarray(labels), caps
+    return collect(make_shape, list(FAMILIES), per_family, split, seed, n_points, families,
+                   progress)

@@ -307,13 +307,10 @@ class Shape:
         return self.captions[0]
 
 
-def make_shape(family: str, index: int, split: str = "train", seed: int = 0,
-               n_points: int = 1024) -> Shape:
-    """Shape ``index`` of ``family`` in ``split``: deterministic given the seed."""
-    if family not in FAMILIES:
-        raise ValueError(f"unknown shape family {family!r}")
-    rng = np.random.default_rng((seed, SPLITS[split], list(FAMILIES).index(family), index))
-    solid, names = FAMILIES[family](rng)
+def surface_sample(family: str, solid, rng: np.random.Generator,
+                   n_points: int) -> tuple[np.ndarray, trimesh.Trimesh]:
+    """Turn a z-up ``solid`` y-up, sample ``n_points`` on its surface and normalise both
+    (the cloud and the mesh in the cloud's frame)."""
     solid = solid.rotate([-90.0, 0.0, 0.0])  # z-up construction -> y-up
     if solid.is_empty():
         raise RuntimeError(f"shape family {family!r} built an empty solid")
@@ -321,21 +318,38 @@ def make_shape(family: str, index: int, split: str = "train", seed: int = 0,
     pts, _ = trimesh.sample.sample_surface(mesh, n_points, seed=int(rng.integers(2**31)))
     pts = np.asarray(pts)
     verts = normalise(np.asarray(mesh.vertices), pts)
-    mesh = trimesh.Trimesh(verts, mesh.faces, process=False)
-    return Shape(family, captions(names), normalise(pts).astype(np.float32), mesh)
+    return normalise(pts).astype(np.float32), trimesh.Trimesh(verts, mesh.faces, process=False)
+
+
+def make_shape(family: str, index: int, split: str = "train", seed: int = 0,
+               n_points: int = 1024) -> Shape:
+    """Shape ``index`` of ``family`` in ``split``: deterministic given the seed."""
+    if family not in FAMILIES:
+        raise ValueError(f"unknown shape family {family!r}")
+    rng = np.random.default_rng((seed, SPLITS[split], list(FAMILIES).index(family), index))
+    solid, names = FAMILIES[family](rng)
+    pts, mesh = surface_sample(family, solid, rng, n_points)
+    return Shape(family, captions(names), pts, mesh)
+
+
+def collect(make, names: list[str], per_family: int, split: str, seed: int, n_points: int,
+            families: list[str] | None, progress=None):
+    """Clouds ``(F * per_family, n, 3)``, family indices (in ``names``) and per-shape caption
+    lists of ``make(family, index, split, seed, n_points)``."""
+    clouds, labels, caps = [], [], []
+    for f in families or names:
+        for i in range(per_family):
+            s = make(f, i, split, seed, n_points)
+            clouds.append(s.points)
+            labels.append(names.index(f))
+            caps.append(s.captions)
+            if progress is not None:
+                progress(1)
+    return np.stack(clouds), np.asarray(labels), caps
 
 
 def make_corpus(per_family: int, split: str = "train", seed: int = 0, n_points: int = 1024,
                 families: list[str] | None = None, progress=None):
     """Clouds ``(F * per_family, n, 3)``, family indices and per-shape caption lists."""
-    fams = families or list(FAMILIES)
-    clouds, labels, caps = [], [], []
-    for f in fams:
-        for i in range(per_family):
-            s = make_shape(f, i, split, seed, n_points)
-            clouds.append(s.points)
-            labels.append(list(FAMILIES).index(f))
-            caps.append(s.captions)
-            if progress is not None:
-                progress(1)
-    return np.stack(clouds), np.asarray(labels), caps
+    return collect(make_shape, list(FAMILIES), per_family, split, seed, n_points, families,
+                   progress)

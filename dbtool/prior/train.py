@@ -51,7 +51,7 @@ class TrainConfig:
     ema: float = 0.999
     per_family: int = 300  # training shapes per family
     corpus: int = 1  # 1: dbtool/prior/shapes.py (the shipped weights), 2: prior/corpus.py
-    corpus_digest: str = ""  # hash of the corpus code the run started with (set by train)
+    corpus_digest: str = ""  # hash of the corpus the run started with (set by train)
     seed: int = 0
     threads: int = 1
     bf16: bool = True
@@ -77,16 +77,19 @@ def corpus_module(version: int):
     return {1: shapes, 2: corpus}[version]
 
 
-def source_digest(mod) -> str:
-    """A short hash of the code that builds a corpus (its module and the ones it imports from
-    ``dbtool.prior``), so a cached corpus is rebuilt when that code changes."""
-    import inspect
-
-    from dbtool.prior import bodies, composites, solids, words
-
-    mods = [mod] if mod is shapes else [mod, bodies, composites, solids, words]
-    src = "".join(inspect.getsource(m) for m in mods)
-    return hashlib.sha256(src.encode()).hexdigest()[:10]
+def corpus_digest(mod, families: int = 0) -> str:
+    """A short hash of what a corpus module builds (the first two training shapes of every
+    family at 64 points, and their captions): a cached corpus is rebuilt, and a training run
+    refuses to resume, when the corpus itself changes, not when its code is only
+    refactored."""
+    h = hashlib.sha256()
+    for f in list(mod.FAMILIES)[: families or None]:
+        for i in range(2):
+            s = mod.make_shape(f, i, "train", 0, 64)
+            h.update(f.encode())
+            h.update(s.points.tobytes())
+            h.update("\n".join(s.captions).encode())
+    return h.hexdigest()[:10]
 
 
 def preset(kind: str, **overrides) -> TrainConfig:
@@ -129,7 +132,7 @@ def load_corpus(cfg: TrainConfig, cache_dir: Path, progress=None):
     """Training clouds (4,096 points, float16), family labels, caption table and, per shape,
     the indices of its captions. Cached as ``.npz`` keyed by seed and size."""
     mod = corpus_module(cfg.corpus)
-    tag = "" if cfg.corpus == 1 else f"v{cfg.corpus}-{source_digest(mod)}-"
+    tag = "" if cfg.corpus == 1 else f"v{cfg.corpus}-{corpus_digest(mod)}-"
     path = cache_dir / f"corpus-{tag}seed{cfg.seed}-{cfg.per_family}x{len(mod.FAMILIES)}.npz"
     if path.exists():
         d = np.load(path, allow_pickle=False)
@@ -206,16 +209,16 @@ def schedule_for(kind: str) -> NoiseSchedule:
 def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path | None = None,
           show_progress: bool = True) -> dict:
     """Train (or resume) one model; returns the final metrics. ``show_progress``: a tqdm bar.
-    Records the corpus code's hash in ``cfg`` and refuses to resume on changed corpus code."""
+    Records the corpus's hash in ``cfg`` and refuses to resume on a changed corpus."""
     from dbtool.runs import RunDir, write_json
 
     torch.set_num_threads(max(1, cfg.threads))
     ckpt_path = Path(run_dir) / "checkpoint.pt"
     if ckpt_path.exists() and not resume:
         raise FileExistsError(f"{ckpt_path} exists: pass --resume or choose another --out")
-    digest = source_digest(corpus_module(cfg.corpus))
+    digest = corpus_digest(corpus_module(cfg.corpus))
     if cfg.corpus_digest and cfg.corpus_digest != digest:
-        raise ValueError(f"the corpus code changed since {run_dir} started (corpus "
+        raise ValueError(f"the corpus changed since {run_dir} started (corpus "
                          f"{cfg.corpus_digest}, now {digest}); a resumed run would train on "
                          "other shapes: start a new run")
     cfg.corpus_digest = digest  # kept in the checkpoint's config
