@@ -129,15 +129,12 @@ def attribute_prompts(families: list[str] | None = None) -> list[dict]:
     its low word and the one with its high word (an attribute without a low word, "tapered",
     is compared with the plain noun phrase), with the family's part count of shape 0."""
     from dbtool.prior import corpus
-    from dbtool.prior.words import ADJECTIVES, NUMBERS, WITH, noun_phrase
+    from dbtool.prior.words import ADJECTIVES, count_phrase, noun_phrase
 
     rows = []
     for fam in families or list(corpus.FAMILIES):
         d = corpus.make_shape(fam, 0, "reference", 0, 16).description
-        count = None
-        if d.counts:
-            part, k = next(iter(d.counts.items()))
-            count = WITH[0].format(n=NUMBERS[k], part=part)
+        count = count_phrase(d)
         for attr in d.grades:
             low, high = ADJECTIVES[attr]
             rows.append({"family": fam, "attribute": attr,

@@ -7,6 +7,7 @@ tests. Reference shapes come from the corpus's ``reference`` split and the ceili
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 
@@ -17,6 +18,7 @@ from dbtool.prior import shapes
 from dbtool.prior.metrics import chamfer_matrix, one_nn_accuracy, one_nna, spread, subsample
 from dbtool.prior.pipeline import Prior
 from dbtool.prior.schedulers import scheduler_for
+from dbtool.prior.train import corpus_module
 
 REF_PER_FAMILY = 32
 HELDOUT_PER_FAMILY = 16
@@ -39,21 +41,21 @@ PARAPHRASES: dict[str, tuple[str, ...]] = {
 INTERPOLATIONS = (("ball", "star"), ("bar", "ring"), ("table", "pyramid"))  # family pairs
 
 
-def corpus_of(version: int):
-    """The module of corpus ``version`` (1: ``shapes``, 2: ``corpus``)."""
-    from dbtool.prior.train import corpus_module
-
-    return corpus_module(version)
+@functools.lru_cache(maxsize=2)
+def descriptions(version: int) -> dict:
+    """The description of shape 0 (``test`` split) of every family of corpus ``version``."""
+    mod = corpus_module(version)
+    return {f: mod.make_shape(f, 0, "test", n_points=16).description for f in mod.FAMILIES}
 
 
 def real_set(split: str, per_family: int, families: list[str], seed: int = 0,
              points: int = METRIC_POINTS, version: int = 1) -> tuple[torch.Tensor, np.ndarray]:
-    clouds, labels, _ = corpus_of(version).make_corpus(per_family, split, seed, 1024, families)
+    clouds, labels, _ = corpus_module(version).make_corpus(per_family, split, seed, 1024, families)
     return subsample(clouds, points, seed=1), labels
 
 
 def family_index(name: str, version: int = 1) -> int:
-    return list(corpus_of(version).FAMILIES).index(name)
+    return list(corpus_module(version).FAMILIES).index(name)
 
 
 def prompt_of(family: str, version: int = 1) -> str:
@@ -62,17 +64,11 @@ def prompt_of(family: str, version: int = 1) -> str:
     first noun, with the part count of shape 0 where another family has the same noun
     (``"a block with four legs"``)."""
     if version != 1:
-        from dbtool.prior.words import NUMBERS, WITH, noun_phrase
+        from dbtool.prior.words import count_phrase, noun_phrase
 
-        mod = corpus_of(version)
-        d = mod.make_shape(family, 0, "test", n_points=16).description
-        shared = sum(mod.make_shape(f, 0, "test", n_points=16).description.nouns[0]
-                     == d.nouns[0] for f in mod.FAMILIES) > 1
-        count = None
-        if d.counts and shared:
-            part, k = next(iter(d.counts.items()))
-            count = WITH[0].format(n=NUMBERS[k], part=part)
-        return noun_phrase(d.nouns[0], [], count)[0]
+        d = descriptions(version)[family]
+        shared = sum(o.nouns[0] == d.nouns[0] for o in descriptions(version).values()) > 1
+        return noun_phrase(d.nouns[0], [], count_phrase(d) if shared else None)[0]
     name = shapes.make_shape(family, 0, "test", n_points=16).captions[0]
     for adjective in ("thin ", "thick "):
         name = name.replace(adjective, "")
@@ -91,7 +87,7 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
     (default: every family), so a sample can be mistaken for any of them. The ceiling is the
     same 1-NN rule applied to real held-out shapes of the prompted families.
     """
-    all_fams = list(corpus_of(version).FAMILIES)
+    all_fams = list(corpus_module(version).FAMILIES)
     fams = families or all_fams
     ref_fams = reference_families or all_fams
     missing = set(fams) - set(ref_fams)
@@ -172,7 +168,7 @@ def heldout_prompts(family: str, version: int = 2, n: int = 2) -> list[str]:
     templates, synonyms, nouns and attribute pairs of the attribute corpus)."""
     out: list[str] = []
     for i in range(20):
-        for c in corpus_of(version).make_shape(family, i, "heldout", n_points=16).captions[1:]:
+        for c in corpus_module(version).make_shape(family, i, "heldout", n_points=16).captions[1:]:
             if c not in out:
                 out.append(c)
             if len(out) == n:

@@ -90,9 +90,10 @@ KNOWN = 0.7  # a prompt whose best cosine similarity to a corpus caption is belo
 def known_captions(version: int = 1) -> tuple[list[str], torch.Tensor]:
     """The captions the prior of ``version`` was trained on (three draws per family, which
     covers every name and template) and their embeddings."""
-    from dbtool.prior import corpus, shapes, text
+    from dbtool.prior import text
+    from dbtool.prior.train import corpus_module
 
-    mod = shapes if version == 1 else corpus
+    mod = corpus_module(version)
     caps = sorted({c for f in mod.FAMILIES for i in range(3)
                    for c in mod.make_shape(f, i, "train", 0, 16).captions})
     return caps, text.encode(caps)

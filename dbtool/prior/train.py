@@ -77,13 +77,13 @@ def corpus_module(version: int):
     return {1: shapes, 2: corpus}[version]
 
 
-def corpus_digest(mod, families: int = 0) -> str:
+def corpus_digest(mod) -> str:
     """A short hash of what a corpus module builds (the first two training shapes of every
     family at 64 points, and their captions): a cached corpus is rebuilt, and a training run
     refuses to resume, when the corpus itself changes, not when its code is only
     refactored."""
     h = hashlib.sha256()
-    for f in list(mod.FAMILIES)[: families or None]:
+    for f in mod.FAMILIES:
         for i in range(2):
             s = mod.make_shape(f, i, "train", 0, 64)
             h.update(f.encode())
@@ -132,7 +132,7 @@ def load_corpus(cfg: TrainConfig, cache_dir: Path, progress=None):
     """Training clouds (4,096 points, float16), family labels, caption table and, per shape,
     the indices of its captions. Cached as ``.npz`` keyed by seed and size."""
     mod = corpus_module(cfg.corpus)
-    tag = "" if cfg.corpus == 1 else f"v{cfg.corpus}-{corpus_digest(mod)}-"
+    tag = "" if cfg.corpus == 1 else f"v{cfg.corpus}-{cfg.corpus_digest or corpus_digest(mod)}-"
     path = cache_dir / f"corpus-{tag}seed{cfg.seed}-{cfg.per_family}x{len(mod.FAMILIES)}.npz"
     if path.exists():
         d = np.load(path, allow_pickle=False)

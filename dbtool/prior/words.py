@@ -75,6 +75,14 @@ class Description:
         return out
 
 
+def count_phrase(desc: Description) -> str | None:
+    """The training phrase of the first part count ("with four legs"), or None."""
+    if not desc.counts:
+        return None
+    part, k = next(iter(desc.counts.items()))
+    return WITH[0].format(n=NUMBERS[k], part=part if k != 1 else SINGULAR[part])
+
+
 def heldout_pair(desc: Description) -> tuple[str, str] | None:
     """The two attributes whose words never appear together in a training caption of this
     family: the first two graded ones in ``ORDER`` (None with fewer than two)."""
@@ -139,11 +147,7 @@ def captions(desc: Description, rng: np.random.Generator, n: int,
     if SPLIT_OF[split] == "train" and pair and pair[0] in words and pair[1] in words:
         canon_attrs.remove(pair[1])
     adjs = [ADJECTIVES[a][0 if words[a] == "low" else 1][0] for a in canon_attrs]
-    count = None
-    if desc.counts:
-        part, k = next(iter(desc.counts.items()))
-        count = WITH[0].format(n=NUMBERS[k], part=part if k != 1 else SINGULAR[part])
-    out = [noun_phrase(desc.nouns[0], adjs, count)[0]]
+    out = [noun_phrase(desc.nouns[0], adjs, count_phrase(desc))[0]]
     for _ in range(8 * n):
         if len(out) >= n:
             break
