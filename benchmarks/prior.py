@@ -10,6 +10,9 @@ Cases (each in a fresh subprocess, so its peak RSS is its own):
 * ``train``: one training step of the base model as it was trained (batch 32 x 256 points, one
   thread), with bfloat16 autocast and in float32.
 
+Sampling autocasts to bfloat16 only where the CPU has native bfloat16 units
+(:mod:`dbtool.prior.precision`); each row says which precision it ran in.
+
 Each case runs once to warm up, then ``--repeats`` times; the median wall time is reported as
 samples per second and seconds per batch. Peak memory is the process's ``VmHWM`` after the case
 minus its ``VmRSS`` after the imports and the model load (the high-water mark is reset there
@@ -92,6 +95,7 @@ def worker(kind: str, batch: int, steps: int, repeats: int, threads: int | None)
     import torch
 
     from dbtool.prior.pipeline import Prior
+    from dbtool.prior.precision import use_bf16
 
     if kind == "train":
         t = train_steps(batch, steps, max(repeats, 5))
@@ -122,7 +126,8 @@ def worker(kind: str, batch: int, steps: int, repeats: int, threads: int | None)
     sec = statistics.median(times)
     return {"kind": kind, "batch": batch, "steps": steps, "seconds": sec,
             "samples_per_s": batch / sec, "peak_mib": (_rss("VmHWM") - base_rss) / 2**20,
-            "threads": torch.get_num_threads(), "repeats": repeats}
+            "threads": torch.get_num_threads(), "repeats": repeats,
+            "precision": "bf16" if use_bf16("cpu", prior.bf16) else "fp32"}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -152,12 +157,17 @@ def main(argv: list[str] | None = None) -> int:
         r = rows[-1]
         print(f"  {kind:9s} batch {batch:3d} steps {steps:3d}: {r['seconds']:.2f} s", flush=True)
 
-    print("\n| model | batch | steps | s / batch | samples / s | peak memory (MiB) |")
-    print("|---|---:|---:|---:|---:|---:|")
+    from dbtool.prior.precision import native_bf16
+
+    print(f"\nnative bfloat16 on this CPU: {native_bf16()} (sampling autocasts to bfloat16 only "
+          "then: dbtool/prior/precision.py)")
+    print("\n| model | batch | steps | precision | s / batch | samples / s | peak memory (MiB) |")
+    print("|---|---:|---:|---|---:|---:|---:|")
     for r in rows:
         if r["kind"] == "train":
             continue
-        print(f"| {r['kind']} | {r['batch']} | {r['steps']} | {r['seconds']:.2f} | "
+        print(f"| {r['kind']} | {r['batch']} | {r['steps']} | {r['precision']} | "
+              f"{r['seconds']:.2f} | "
               f"{r['samples_per_s']:.2f} | {r['peak_mib']:.0f} |")
     for r in rows:
         if r["kind"] == "train":
@@ -174,8 +184,8 @@ def main(argv: list[str] | None = None) -> int:
 
     config = {"benchmark": "prior", "cases": QUICK_CASES if a.quick else CASES,
               "repeats": repeats, "threads": a.threads, "quick": a.quick}
-    write_result({"goal_epoch_s": GOAL_EPOCH_S, "cases": rows}, a.out, DEFAULT_OUT, a.quick,
-                 config)
+    write_result({"goal_epoch_s": GOAL_EPOCH_S, "native_bf16": native_bf16(), "cases": rows},
+                 a.out, DEFAULT_OUT, a.quick, config)
     return 0
 
 

@@ -20,6 +20,7 @@ import torch
 from dbtool.prior import text
 from dbtool.prior.diffusion import SCALE, EpsModel, Step, denoise
 from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
+from dbtool.prior.precision import use_bf16
 from dbtool.prior.schedulers import DDIMScheduler, DDPMScheduler, NoiseSchedule, Scheduler
 
 WEIGHTS_ROOT = Path(__file__).parent / "weights"
@@ -100,7 +101,7 @@ class Prior:
     sampler on another schedule than the model's training schedule gives wrong samples."""
 
     def __init__(self, base: EpsModel, upsampler: PointDiffusionTransformer | None = None,
-                 bf16: bool = True, scheduler: Scheduler | None = None,
+                 bf16: bool | None = None, scheduler: Scheduler | None = None,
                  up_scheduler: Scheduler | None = None) -> None:
         self.base, self.upsampler, self.bf16 = base, upsampler, bf16
         self.scheduler = scheduler or DDPMScheduler(NoiseSchedule.cosine())
@@ -127,8 +128,10 @@ class Prior:
         return text.encode(list(prompts) if not isinstance(prompts, str) else [prompts])
 
     def eps(self, x: torch.Tensor, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
-        """The base model's epsilon (bfloat16 autocast on ``x``'s device when ``bf16``)."""
-        with torch.autocast(x.device.type, dtype=torch.bfloat16, enabled=self.bf16):
+        """The base model's epsilon (bfloat16 autocast on ``x``'s device when ``bf16``, by
+        default where it is native: :mod:`dbtool.prior.precision`)."""
+        with torch.autocast(x.device.type, dtype=torch.bfloat16,
+                            enabled=use_bf16(x.device.type, self.bf16)):
             return self.base(x, t, cond).float()
 
     # ------------------------------------------------------------------ sampling
@@ -210,7 +213,8 @@ class Prior:
 
         def eps(x, t, cond):
             reps = x.shape[0] // n
-            with torch.autocast(x.device.type, dtype=torch.bfloat16, enabled=self.bf16):
+            with torch.autocast(x.device.type, dtype=torch.bfloat16,
+                                enabled=use_bf16(x.device.type, self.bf16)):
                 return self.upsampler(x, t, cond, c.repeat(reps, 1, 1)).float()
 
         *_, last = denoise(self.up_scheduler, eps, x_T, [(null, 1.0)], steps, generator=gen)

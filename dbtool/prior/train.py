@@ -5,7 +5,8 @@ condition dropped with p = 0.1); the upsampler learns the other 3,072 points of 
 cloud given 1,024 of them (linear schedule, no text: the coarse cloud carries the shape). Each
 step trains on a random subset of ``subset`` points per cloud: the model's cost is linear in the
 points and a subset-trained model samples full clouds just as well
-(measured on a prototype). Mixed precision uses bfloat16 autocast (the CPU's AMX units).
+(measured on a prototype). Mixed precision uses bfloat16 autocast where the CPU has native
+bfloat16 units (AMX, AVX512-BF16), float32 elsewhere (:mod:`dbtool.prior.precision`).
 
 A run directory holds ``config.json``, ``manifest.json``, ``metrics.jsonl`` (the loss log) and
 ``checkpoint.pt`` (model, EMA, optimiser, RNG states), written atomically every
@@ -29,6 +30,7 @@ from dbtool.atomic import atomic_write, atomic_write_text
 from dbtool.prior import shapes, text
 from dbtool.prior.diffusion import SCALE, diffusion_loss
 from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
+from dbtool.prior.precision import use_bf16
 from dbtool.prior.schedulers import NoiseSchedule
 
 COARSE = 1024
@@ -54,7 +56,7 @@ class TrainConfig:
     corpus_digest: str = ""  # hash of the corpus the run started with (set by train)
     seed: int = 0
     threads: int = 1
-    bf16: bool = True
+    bf16: bool | None = None  # bfloat16 autocast; None: where the CPU has it natively
     ckpt_every: int = 250
     log_every: int = 25
     model: ModelConfig = field(default_factory=ModelConfig)
@@ -274,7 +276,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path
         def net(x, t, c, coarse=coarse):
             return model(x, t, c, coarse)
 
-        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=cfg.bf16):
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=use_bf16("cpu", cfg.bf16)):
             loss = diffusion_loss(schedule, net, x0, cond, gen,
                                   p_uncond=0.1 if cfg.kind == "base" else 0.0)
         opt.zero_grad(set_to_none=True)
