@@ -97,11 +97,17 @@ def run(a, cache, prior, task: str):  # noqa: C901 - one branch per experiment
     """The experiment ``a.experiment`` on ``task``: its result, its tables printed."""
     e = a.experiment
     if e == "embedding":
-        runs = [cache.get(f"embedding-{task}-{s}", ex.embedding_config(task, s, a.epochs),
-                          lambda s=s: ex.embedding_run(prior, task, s, a.epochs))
+        pv = prior.corpus
+        runs = [cache.get(f"embedding-{task}-{s}",
+                          ex.embedding_config(task, s, a.epochs, a.space, a.free_lr, pv),
+                          lambda s=s: ex.embedding_run(prior, task, s, a.epochs, a.space,
+                                                       a.free_lr))
                 for s in a.seeds]
         first, last = [r["means"][0] for r in runs], [r["means"][-1] for r in runs]
         result = {"epoch0": first, "last": last, "runs": runs}
+        table(f"{task} ({a.space or 'mixture'} space)", ["seed", "epoch means", "|c|"],
+              [[s, " -> ".join(f"{m:.5f}" for m in r["means"]), f"{r.get('c_norm', 0):.3f}"]
+               for s, r in zip(a.seeds, runs, strict=True)])
         print(f"\n{task}: epoch 0 mean {summary(first)}, epoch {a.epochs - 1} mean "
               f"{summary(last)}")
     elif e == "conditions":
@@ -244,6 +250,11 @@ def main() -> None:
     ap.add_argument("--conditions", type=Path,
                     help="bandit: replay this conditions results JSON (default: the cache)")
     ap.add_argument("--bandit-runs", type=int, default=400, help="bandit: modelled runs")
+    ap.add_argument("--space", choices=["mixture", "captions", "free"],
+                    help="embedding: where c lives (default: the preset's, mixture)")
+    ap.add_argument("--free-lr", type=float, help="embedding: Adam step on a free c")
+    ap.add_argument("--prior", type=int, help="shipped prior version (default: the default)")
+    ap.add_argument("--base", type=Path, help="base model weights or training checkpoint")
     a = ap.parse_args()
     if a.conditions is not None and not a.conditions.is_file():
         raise SystemExit(f"error: {a.conditions} is not a file")
@@ -255,14 +266,15 @@ def main() -> None:
     if a.experiment != "bandit":
         from dbtool.prior.pipeline import Prior
 
-        prior = Prior.load(with_upsampler=False)
+        prior = Prior.load(a.base, with_upsampler=False, version=a.prior)
     cache = ex.Cache(RESULTS / "codesign-cache")
     try:
         tasks = a.tasks or DEFAULTS.get(a.experiment, ["crawling", "gripping"])
         result = {task: run(a, cache, prior, task) for task in tasks}
     except LookupError as exc:
         raise SystemExit(f"error: {exc}") from None
-    config = {**{k: v for k, v in vars(a).items() if k != "conditions"}, "tasks": tasks,
+    config = {**{k: (str(v) if isinstance(v, Path) else v) for k, v in vars(a).items()
+                 if k != "conditions"}, "tasks": tasks,
               "quick_preset": {t: [asdict(c) for c in preset("quick", t)] for t in tasks}}
     if a.conditions is not None:
         config.update(conditions=str(a.conditions), conditions_sha256=file_digest(a.conditions))
@@ -270,7 +282,9 @@ def main() -> None:
         "-smooth" if a.smooth else "") + (
         f"-ss{a.step_scale:g}" if a.step_scale is not None else "") + (
         f"-pg{a.prompt_guidance:g}" if a.prompt_guidance != 3.0 else "") + (
-        f"-tm{a.prompt_t_min}" if a.experiment == "text" and a.prompt_t_min else "")
+        f"-tm{a.prompt_t_min}" if a.experiment == "text" and a.prompt_t_min else "") + (
+        f"-{a.space}" if a.space else "") + (f"-lr{a.free_lr:g}" if a.free_lr else "") + (
+        f"-prior{prior.corpus}" if prior is not None and prior.corpus != 1 else "")
     write_result({"experiment": a.experiment, "seeds": a.seeds, **result}, None,
                  RESULTS / f"codesign-{a.experiment}{suffix}.json", False, config)
 

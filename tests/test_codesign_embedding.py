@@ -202,3 +202,29 @@ def test_prior_samples_one_condition_per_design():
                                                                        atol=1e-4)
     with pytest.raises(ValueError, match="give 1 or n"):
         prior.sample(embedding=torch.cat([a, b]), n=3, steps=2)
+
+
+def test_free_space_steps_the_raw_vector_at_its_own_rate():
+    from dataclasses import replace
+
+    emb, _ = preset("quick", "crawling")
+    emb = replace(emb, space="free", samples_per_epoch=2, min_buffer=2, batch_size=2,
+                  sample_steps=4, train_iters=1)
+    prior = Prior.load(with_upsampler=False)
+    start = prior.embed("a block")
+    opt = EmbeddingOptimiser(prior, get_task("crawling"), emb, start, seed=0, n_steps=4)
+    assert opt.opt.param_groups[0]["lr"] == emb.free_lr != emb.lr
+    assert opt.embedding.weights() is None
+    opt.step()
+    moved = (opt.current() - start).abs()
+    # Adam's first step moves every coordinate with a gradient by about the learning rate
+    assert float(moved.max()) == pytest.approx(emb.free_lr, rel=0.05)
+
+
+def test_atoms_follow_the_corpus_the_prior_was_trained_on():
+    names1, caps1 = caption_atoms(1)
+    names2, caps2 = caption_atoms(2)
+    assert len(names1) == 28 and "a ball" in names1
+    assert len(names2) == 54 and caps2.shape == (54, 384)
+    assert "a block with four legs" in names2 and len(set(names2)) == 54
+    assert Prior.load(with_upsampler=False).corpus == 1

@@ -34,6 +34,7 @@ class EmbeddingConfig:
     sample_steps: int = 64  # strided sampler steps per design
     loss_guidance: float = 1.0  # guidance of the predictor trained (1: conditional, as paper)
     space: str = "mixture"  # where c lives: mixture of atoms | captions (convex hull) | free
+    free_lr: float = 2e-3  # Adam on the raw 384-d c (space "free"; unit-norm captions)
     baseline: bool = False  # subtract the loss on the newest unfiltered samples
     elite: bool = False  # train on the top-k of the FIFO and of the best designs ever
 

@@ -83,14 +83,21 @@ def train_step(prior, c: torch.Tensor | Callable[[], torch.Tensor], opt: torch.o
     return float(loss.detach())
 
 
-@lru_cache(maxsize=1)
-def caption_atoms() -> tuple[tuple[str, ...], torch.Tensor]:
-    """One caption per corpus family ("a ball", "a star", ...) and their embeddings: the
-    conditions the shipped prior was trained on."""
-    from dbtool.prior.shapes import FAMILIES, make_shape
+@lru_cache(maxsize=2)
+def caption_atoms(corpus: int = 1) -> tuple[tuple[str, ...], torch.Tensor]:
+    """One caption per family of corpus ``corpus`` ("a ball", "a star", ..., on the attribute
+    corpus "a block with four legs") and their embeddings: the conditions the prior was
+    trained on (its family prompts, docs/prior.md)."""
+    from dbtool.prior.evaluate import prompt_of
     from dbtool.prior.text import encode
+    from dbtool.prior.train import corpus_module
 
-    names = tuple(make_shape(f, 0, "train", 0, 64).caption for f in FAMILIES)
+    if corpus == 1:
+        from dbtool.prior.shapes import FAMILIES, make_shape
+
+        names = tuple(make_shape(f, 0, "train", 0, 64).caption for f in FAMILIES)
+    else:
+        names = tuple(prompt_of(f, corpus) for f in corpus_module(corpus).FAMILIES)
     return names, encode(list(names))
 
 
@@ -110,7 +117,7 @@ class Embedding(torch.nn.Module):
     """
 
     def __init__(self, start: torch.Tensor, space: str = "mixture",
-                 start_weight: float = 0.9) -> None:
+                 start_weight: float = 0.9, corpus: int = 1) -> None:
         super().__init__()
         if space not in SPACES:
             raise ValueError(f"unknown embedding space {space!r}; choose one of "
@@ -120,7 +127,7 @@ class Embedding(torch.nn.Module):
         if space == "free":
             self.c = torch.nn.Parameter(start.clone())
             return
-        _, caps = caption_atoms()
+        _, caps = caption_atoms(corpus)
         atoms = torch.cat([start, torch.zeros_like(start), caps])
         null = float(start.norm()) == 0
         if null:
@@ -190,8 +197,10 @@ class EmbeddingOptimiser:
     def __post_init__(self) -> None:
         for p in self.prior.base.parameters():
             p.requires_grad_(False)
-        self.embedding = Embedding(self.c, self.cfg.space)
-        self.opt = torch.optim.Adam(self.embedding.parameters(), lr=self.cfg.lr)
+        self.embedding = Embedding(self.c, self.cfg.space,
+                                   corpus=getattr(self.prior, "corpus", 1))
+        lr = self.cfg.free_lr if self.cfg.space == "free" else self.cfg.lr
+        self.opt = torch.optim.Adam(self.embedding.parameters(), lr=lr)
         self.buffer = Buffer(self.cfg.buffer_size)
         self.gen = torch.Generator().manual_seed(self.seed)
 

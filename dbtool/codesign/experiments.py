@@ -77,20 +77,30 @@ def configs(task: str, epochs: int | None = None, **codesign) -> tuple[Embedding
 
 
 # --------------------------------------------------------------------- embedding optimisation
-def embedding_config(task: str, seed: int, epochs: int) -> dict:
-    return {"experiment": "embedding", "task": task, "seed": seed,
-            "embedding": asdict(configs(task, epochs)[0])}
-
-
-def embedding_run(prior, task: str, seed: int, epochs: int) -> dict:
-    """Algorithm 1 from the null embedding: each epoch's metrics and atoms, the final mixture
-    weights and the condition ``c`` it hands to co-design."""
+def embedding_config(task: str, seed: int, epochs: int, space: str | None = None,
+                     free_lr: float | None = None, prior: int = 1) -> dict:
+    """The resolved config of one embedding run: the quick preset with ``space`` and
+    ``free_lr`` when given, and the corpus version of the prior it runs on (its atoms)."""
     emb = configs(task, epochs)[0]
+    emb = replace(emb, **{k: v for k, v in (("space", space), ("free_lr", free_lr))
+                          if v is not None})
+    cfg = {"experiment": "embedding", "task": task, "seed": seed, "embedding": asdict(emb)}
+    return cfg if prior == 1 else {**cfg, "prior": prior}
+
+
+def embedding_run(prior, task: str, seed: int, epochs: int, space: str | None = None,
+                  free_lr: float | None = None) -> dict:
+    """Algorithm 1 from the null embedding: each epoch's metrics and atoms, the final mixture
+    weights (None for a free ``c``) and the condition ``c`` it hands to co-design."""
+    emb = EmbeddingConfig(**embedding_config(task, seed, epochs, space, free_lr)["embedding"])
     opt = EmbeddingOptimiser(prior, get_task(task), emb, NULL, seed=seed)
     rows = [opt.step() for _ in range(epochs)]
+    w = opt.embedding.weights()
     return {"means": [r["mean"] for r in rows], "maxes": [r["max"] for r in rows],
             "metrics": [r["metrics"] for r in rows], "atoms": [r["atoms"] for r in rows],
-            "weights": opt.embedding.weights().tolist(), "c": opt.current()[0].tolist()}
+            "losses": [r["loss"] for r in rows],
+            "weights": None if w is None else w.tolist(), "c": opt.current()[0].tolist(),
+            "c_norm": float(opt.current().norm())}
 
 
 def optimised(cache: Cache, task: str, seed: int, epochs: int, required: bool = True
@@ -143,7 +153,7 @@ def conditions_run(prior, task: str, n: int = 4, seed: int = 7) -> dict:
     corpus family, in :class:`Embedding`'s atom order), guidance 3, 32 steps, scored."""
     from dbtool.codesign.embedding import caption_atoms
 
-    names, caps = caption_atoms()
+    names, caps = caption_atoms(getattr(prior, "corpus", 1))
     out = {}
     for name, e in zip(("null", *names), torch.cat([NULL, caps]), strict=True):
         x = prior.sample(embedding=e[None], n=n, guidance=3.0, steps=32, seed=seed).clouds

@@ -69,7 +69,7 @@ def load_model(path: str | Path, kind: str | None = None) -> tuple[PointDiffusio
         raise CheckpointError(f"not a dbtool prior checkpoint: {path}")
     if "ema" in ck:  # training checkpoint
         meta = {"kind": ck["config"]["kind"], "model": ck["config"]["model"],
-                "steps": ck["step"], "train_seconds": ck["elapsed"]}
+                "steps": ck["step"], "train_seconds": ck["elapsed"], "train_config": ck["config"]}
         state = ck["ema"]
     else:
         meta, state = {k: v for k, v in ck.items() if k != "state"}, ck["state"]
@@ -104,6 +104,7 @@ class Prior:
                  bf16: bool | None = None, scheduler: Scheduler | None = None,
                  up_scheduler: Scheduler | None = None) -> None:
         self.base, self.upsampler, self.bf16 = base, upsampler, bf16
+        self.corpus = 1  # the corpus version the base model was trained on (set by load)
         self.scheduler = scheduler or DDPMScheduler(NoiseSchedule.cosine())
         self.up_scheduler = up_scheduler or DDIMScheduler(NoiseSchedule.linear())
 
@@ -115,11 +116,13 @@ class Prior:
         files; the upsampler is loaded when ``with_upsampler`` or a path is given.
         ``schedulers``: ``scheduler`` and/or ``up_scheduler`` (see :class:`Prior`)."""
         folder = weights_dir(version) if version is not None else WEIGHTS
-        model, _ = load_model(base or folder / "base.pt", "base")
+        model, meta = load_model(base or folder / "base.pt", "base")
         up = None
         if with_upsampler or upsampler is not None:
             up, _ = load_model(upsampler or folder / "upsampler.pt", "upsampler")
-        return cls(model, up, **schedulers)
+        prior = cls(model, up, **schedulers)
+        prior.corpus = int(meta.get("train_config", meta).get("corpus", 1))
+        return prior
 
     # ------------------------------------------------------------------ conditions
     @staticmethod
