@@ -62,8 +62,11 @@ def prior_evaluate(
     out: Path = typer.Option(Path("runs/prior/eval.json"), help="metrics JSON"),
     corpus: int = typer.Option(1, help="the corpus whose families and references are used: "
                                "1 or 2 (the attribute corpus)"),
+    attribute_pairs: int = typer.Option(4, min=1, help="corpus 2: noise draws per low/high "
+                                        "attribute prompt pair and per legs prompt"),
 ) -> None:
-    """Prompt fidelity (1-NN Chamfer), its ceiling, paraphrases, diversity, interpolation."""
+    """Prompt fidelity (1-NN Chamfer), its ceiling, paraphrases, diversity, interpolation;
+    on corpus 2 also held-out phrasings, attribute control and part counts."""
     from dbtool.prior.evaluate import evaluate
     from dbtool.prior.pipeline import Prior
     from dbtool.runs import write_json
@@ -74,6 +77,15 @@ def prior_evaluate(
             raise ValueError(f"unknown corpus version {corpus}: 1 or 2")
         res = evaluate(prior, families or None, samples, steps, guidance, log=typer.echo,
                        version=corpus)
+        if corpus == 2:
+            from dbtool.attributes import attribute_control, attribute_prompts, legs_control
+
+            res["attributes"] = attribute_control(prior, attribute_prompts(families or None),
+                                                  n=attribute_pairs, guidance=guidance)
+            right = sum(r["right"] for r in res["attributes"])
+            res["attribute_accuracy"] = right / sum(r["pairs"] for r in res["attributes"])
+            res["legs"] = legs_control(prior, n=attribute_pairs, guidance=guidance)
+            typer.echo(f"attribute control: {res['attribute_accuracy']:.2f} of pairs right")
         write_json(out, res)
     typer.echo(f"accuracy {res['accuracy']:.3f} (lowest family {res['min_accuracy']:.2f}, "
                f"ceiling {res['ceiling']:.3f}) -> {out}")

