@@ -137,3 +137,20 @@ def test_the_assembly_sheet_lists_parts_steps_and_line_lengths(made):
     assert f"{int(math.ceil(total / 10.0) * 10)}" in md
     assert "WARNING" not in md
     assert (out / "exploded.png").stat().st_size > 20_000
+
+
+def test_a_finger_that_stops_short_of_the_base_is_continued_up_to_it():
+    from dbtool.export._manifold import manifold3d as m3
+    from dbtool.export.gripper import reach_root
+
+    # a 10 x 30 x 8 mm finger whose top ends 6 mm below the base's lower face (y = 40)
+    finger = m3.Manifold.cube([10.0, 30.0, 8.0]).translate([5.0, 4.0, 3.0])
+    joined, short = reach_root(finger, root=40.0)
+    assert short == pytest.approx(6.0)
+    lo, hi = joined.bounding_box()[:3], joined.bounding_box()[3:]
+    assert hi[1] == pytest.approx(40.0) and lo[1] == pytest.approx(4.0)
+    assert (hi[0], hi[2]) == pytest.approx((15.0, 11.0))  # its own cross-section, not wider
+    assert joined.volume() == pytest.approx(10.0 * 36.0 * 8.0, rel=1e-6)
+    assert len(joined.decompose()) == 1
+    same, none = reach_root(joined, root=40.0)
+    assert none == 0.0 and same.volume() == pytest.approx(joined.volume())

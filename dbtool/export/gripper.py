@@ -85,6 +85,24 @@ def _mirror(solid, plane: float):
     return solid.mirror([0.0, 0.0, 1.0]).translate([0.0, 0.0, 2 * plane])
 
 
+def reach_root(finger, root: float, depth: float = 1.5) -> tuple[object, float]:
+    """The finger continued straight up to the base's lower face (``root``, mm) when its top
+    stops below it, and how far it stopped (mm; 0 when it reaches the base).
+
+    That happens when the design's top sites hang from the body by a thread of single sites:
+    the simulator's grid glues the thread to the base, but the mesh's largest piece does not
+    include it. The continuation is the finger's own cross-section ``depth`` mm below its top,
+    extruded up to the base, so the printed finger can be glued where the simulated one is."""
+    top = finger.bounding_box()[4]
+    if top >= root - 1e-3:
+        return finger, 0.0
+    y0 = top - depth
+    section = finger.rotate([90.0, 0.0, 0.0]).slice(y0)  # y becomes z: a horizontal section
+    column = section.extrude(root + 1.0 - y0).translate([0.0, 0.0, y0]).rotate([-90.0, 0.0, 0.0])
+    joined = (finger + column).trim_by_plane([0.0, -1.0, 0.0], -root)
+    return joined, float(root - top)
+
+
 def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
     s = cfg.scale_mm
     t0 = time.perf_counter()
@@ -96,7 +114,7 @@ def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
     pillars = _root_pillars(design, s, root)
     finger = body.solid(keep_largest=False, boxes=pillars, clip=ws)
     finger = finger.trim_by_plane([0.0, -1.0, 0.0], -root)  # keep y <= root
-    finger = largest_component(finger)
+    finger, short = reach_root(largest_component(finger), root)
     plane = FULL[2] / 2 * s  # the finger lies in z < plane, its mirror in z > plane
     t_mesh = time.perf_counter()
     vox = Voxels.of(finger, cfg.pitch)
@@ -176,7 +194,8 @@ def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
     timings = {"mesh_s": t_mesh - t0, "routing_s": t_route - t_mesh,
                "infill_s": t_infill - t_route, "channels_s": t_channels - t_infill,
                "assembly_s": time.perf_counter() - t_channels}
-    notes = {"root_gap_mm": round(gap, 3), "root_bridge_mm3": round(bridge, 1),
+    notes = {"root_gap_mm": round(gap, 3), "root_extension_mm": round(short, 3),
+             "root_bridge_mm3": round(bridge, 1),
              "root_pillar_fill_mm3": round(fill, 1),
              "glue_face_mm2": round(_root_area(solid_finger, root), 1)}
     return Assembly(parts, union, tendons, design_volume(design, s, largest=True),

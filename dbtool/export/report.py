@@ -183,6 +183,11 @@ def report_markdown(rep: dict) -> str:
         lines += ["", f"The design's top sites stop {rep['root_gap_mm']:.2f} mm below the base "
                       "(the simulator's grid joins them across it); the export fills that gap "
                       f"with {rep['root_bridge_mm3']:.0f} mm³ so the finger meets the base."]
+    if rep.get("root_extension_mm", 0) > 0:
+        lines += ["", f"**Root extended:** the finger's largest piece stopped "
+                      f"{rep['root_extension_mm']:.1f} mm below the base (the design's top sites "
+                      "hang from it by a thread the mesh does not keep); the export continues "
+                      "its cross-section straight up to the base so it can be glued there."]
     dropped = v["design_total_mm3"] - v["design_solid_mm3"]
     if dropped > 0:
         lines += ["", f"**Loose pieces dropped:** {dropped:.0f} mm³ of the design "
