@@ -287,3 +287,37 @@ def test_every_method_fits_the_budget(name):
 
 def test_gradient_iterations_of_tiny_budgets():
     assert [gradient_iterations(u) for u in (0, 1, 4, 5, 8, 9)] == [0, 0, 0, 1, 1, 2]
+
+
+def test_a_ray_cluster_without_live_nodes_is_an_error_not_a_hang(monkeypatch):
+    """A raylet that dies leaves ``ray.wait`` waiting forever on its tasks: the loop polls,
+    and stops with one error once no node is alive. Ray itself is replaced by a stand-in that
+    reports a dead cluster (killing a real raylet is not reproducible)."""
+    from dbtool.compare import executors
+
+    class DeadCluster:
+        cancelled: list = []
+        shut = False
+
+        def remote(self, **_):
+            return lambda fn: type("R", (), {"remote": staticmethod(lambda spec: spec.task)})
+
+        def wait(self, refs, num_returns, timeout):
+            assert timeout is not None  # never an unbounded wait
+            return [], refs
+
+        def nodes(self):
+            return [{"Alive": False}]
+
+        def cancel(self, ref, force):
+            self.cancelled.append(ref)
+
+        def shutdown(self):
+            DeadCluster.shut = True
+
+    dead = DeadCluster()
+    monkeypatch.setattr(executors, "connect_ray", lambda workers, address: dead)
+    specs = [type("S", (), {"threads": 1, "task": t})() for t in ("crawling", "gripping")]
+    with pytest.raises(executors.ExecutorError, match="no live node left \\(2 cells"):
+        list(executors._ray(specs, 2, None, poll_s=0.01))
+    assert sorted(dead.cancelled) == ["crawling", "gripping"] and DeadCluster.shut

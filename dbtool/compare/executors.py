@@ -112,14 +112,33 @@ def connect_ray(workers: int, address: str | None):
     return ray
 
 
-def _ray(specs: list[CellSpec], workers: int, address: str | None) -> Iterator[dict]:
+RAY_POLL_S = 20.0  # how often a wait for the next cell checks that the cluster still has nodes
+
+
+def _alive(ray) -> bool:
+    """Whether the cluster still has a live node (a raylet that died takes its tasks with it
+    and ``ray.wait`` would wait for them forever)."""
+    try:
+        return any(n.get("Alive") for n in ray.nodes())
+    except Exception:  # noqa: BLE001 - an unreachable control store: no cluster either
+        return False
+
+
+def _ray(specs: list[CellSpec], workers: int, address: str | None,
+         poll_s: float = RAY_POLL_S) -> Iterator[dict]:
     ray = connect_ray(workers, address)
     # one CPU per cell; a worker that dies takes its cell with it and Ray runs it again
     remote = ray.remote(num_cpus=specs[0].threads, max_retries=3)(run_cell)
     pending = {remote.remote(s): s for s in specs}
     try:
         while pending:
-            done, _ = ray.wait(list(pending), num_returns=1)
+            done, _ = ray.wait(list(pending), num_returns=1, timeout=poll_s)
+            if not done:
+                if not _alive(ray):
+                    raise ExecutorError(f"the Ray cluster has no live node left ({len(pending)} "
+                                        "cells unfinished); finished cells are saved: run the "
+                                        "same command again to continue")
+                continue
             ref = done[0]
             spec = pending.pop(ref)
             try:
