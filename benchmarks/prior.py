@@ -11,7 +11,7 @@ Cases (each in a fresh subprocess, so its peak RSS is its own):
   thread), with bfloat16 autocast and in float32.
 
 Sampling autocasts to bfloat16 only where the CPU has native bfloat16 units
-(:mod:`dbtool.prior.precision`); each row says which precision it ran in.
+(:mod:`dbtool.precision`); each row says which precision it ran in.
 
 Each case runs once to warm up, then ``--repeats`` times; the median wall time is reported as
 samples per second and seconds per batch. Peak memory is the process's ``VmHWM`` after the case
@@ -94,8 +94,8 @@ def worker(kind: str, batch: int, steps: int, repeats: int, threads: int | None)
     import numpy as np
     import torch
 
+    from dbtool.precision import use_bf16
     from dbtool.prior.pipeline import Prior
-    from dbtool.prior.precision import use_bf16
 
     if kind == "train":
         t = train_steps(batch, steps, max(repeats, 5))
@@ -157,10 +157,10 @@ def main(argv: list[str] | None = None) -> int:
         r = rows[-1]
         print(f"  {kind:9s} batch {batch:3d} steps {steps:3d}: {r['seconds']:.2f} s", flush=True)
 
-    from dbtool.prior.precision import native_bf16
+    from dbtool.precision import native_bf16
 
     print(f"\nnative bfloat16 on this CPU: {native_bf16()} (sampling autocasts to bfloat16 only "
-          "then: dbtool/prior/precision.py)")
+          "then: dbtool/precision.py)")
     print("\n| model | batch | steps | precision | s / batch | samples / s | peak memory (MiB) |")
     print("|---|---:|---:|---|---:|---:|---:|")
     for r in rows:

@@ -78,16 +78,20 @@ def commit_tag(commit: dict | None = None) -> str:
 
 
 def machine() -> dict:
-    """Host name, platform, CPU count and the versions of the packages results depend on."""
+    """Host name, platform, CPU model and count, whether it has native bfloat16 units
+    (the prior's precision, :mod:`dbtool.precision`) and the versions of the packages
+    results depend on."""
     versions = {}
     for pkg in PACKAGES:
         try:
             versions[pkg] = version(pkg)
         except PackageNotFoundError:
             versions[pkg] = None
+    from dbtool.precision import cpu_model, native_bf16
+
     return {"hostname": socket.gethostname(), "platform": platform.platform(),
-            "processor": platform.processor(), "cpus": os.cpu_count(),
-            "python": platform.python_version(), **versions}
+            "processor": platform.processor(), "cpu": cpu_model(), "cpus": os.cpu_count(),
+            "bf16_native": native_bf16(), "python": platform.python_version(), **versions}
 
 
 def file_digest(path: str | Path) -> str:

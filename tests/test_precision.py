@@ -1,10 +1,10 @@
-"""The prior's float format per machine (dbtool.prior.precision)."""
+"""The prior's float format per machine (dbtool.precision)."""
 
 from __future__ import annotations
 
 import pytest
 
-from dbtool.prior import precision
+from dbtool import precision
 
 AMX = "processor\t: 0\nflags\t\t: fpu sse avx2 avx512f avx512_bf16 amx_bf16 amx_tile\n"
 AVX2 = "processor\t: 0\nflags\t\t: fpu sse sse2 avx avx2 fma\n"
@@ -44,3 +44,12 @@ def test_environment_overrides(monkeypatch):
     with pytest.raises(ValueError, match="DBTOOL_BF16"):
         precision.native_bf16()
     precision.native_bf16.cache_clear()
+
+
+def test_results_record_the_cpu_and_its_precision():
+    from dbtool.provenance import machine
+
+    assert precision.cpu_model("model name\t: AMD EPYC\nflags\t: avx2\n") == "AMD EPYC"
+    assert precision.cpu_model("") is None
+    m = machine()
+    assert m["bf16_native"] is precision.native_bf16() and "cpu" in m

@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from dbtool.precision import use_bf16
 from dbtool.prior import text
 from dbtool.prior.diffusion import SCALE, EpsModel, Step, denoise
 from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
-from dbtool.prior.precision import use_bf16
 from dbtool.prior.schedulers import DDIMScheduler, DDPMScheduler, NoiseSchedule, Scheduler
 
 WEIGHTS_ROOT = Path(__file__).parent / "weights"
@@ -132,7 +132,7 @@ class Prior:
 
     def eps(self, x: torch.Tensor, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
         """The base model's epsilon (bfloat16 autocast on ``x``'s device when ``bf16``, by
-        default where it is native: :mod:`dbtool.prior.precision`)."""
+        default where it is native: :mod:`dbtool.precision`)."""
         with torch.autocast(x.device.type, dtype=torch.bfloat16,
                             enabled=use_bf16(x.device.type, self.bf16)):
             return self.base(x, t, cond).float()

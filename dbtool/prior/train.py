@@ -6,7 +6,7 @@ cloud given 1,024 of them (linear schedule, no text: the coarse cloud carries th
 step trains on a random subset of ``subset`` points per cloud: the model's cost is linear in the
 points and a subset-trained model samples full clouds just as well
 (measured on a prototype). Mixed precision uses bfloat16 autocast where the CPU has native
-bfloat16 units (AMX, AVX512-BF16), float32 elsewhere (:mod:`dbtool.prior.precision`).
+bfloat16 units (AMX, AVX512-BF16), float32 elsewhere (:mod:`dbtool.precision`).
 
 A run directory holds ``config.json``, ``manifest.json``, ``metrics.jsonl`` (the loss log) and
 ``checkpoint.pt`` (model, EMA, optimiser, RNG states), written atomically every
@@ -27,10 +27,10 @@ import numpy as np
 import torch
 
 from dbtool.atomic import atomic_write, atomic_write_text
+from dbtool.precision import use_bf16
 from dbtool.prior import shapes, text
 from dbtool.prior.diffusion import SCALE, diffusion_loss
 from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
-from dbtool.prior.precision import use_bf16
 from dbtool.prior.schedulers import NoiseSchedule
 
 COARSE = 1024

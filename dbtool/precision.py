@@ -16,15 +16,24 @@ from pathlib import Path
 NATIVE_FLAGS = ("avx512_bf16", "amx_bf16")  # /proc/cpuinfo flags of native bfloat16 units
 
 
-def cpu_flags(cpuinfo: str | None = None) -> set[str]:
-    """The CPU feature flags Linux reports (empty where ``/proc/cpuinfo`` does not exist)."""
+def _cpuinfo_field(names: tuple[str, ...], cpuinfo: str | None) -> str | None:
     if cpuinfo is None:
         path = Path("/proc/cpuinfo")
         cpuinfo = path.read_text(errors="replace") if path.is_file() else ""
     for line in cpuinfo.splitlines():
-        if line.split(":", 1)[0].strip() in ("flags", "Features"):
-            return set(line.split(":", 1)[1].split())
-    return set()
+        if line.split(":", 1)[0].strip() in names:
+            return line.split(":", 1)[1].strip()
+    return None
+
+
+def cpu_flags(cpuinfo: str | None = None) -> set[str]:
+    """The CPU feature flags Linux reports (empty where ``/proc/cpuinfo`` does not exist)."""
+    return set((_cpuinfo_field(("flags", "Features"), cpuinfo) or "").split())
+
+
+def cpu_model(cpuinfo: str | None = None) -> str | None:
+    """The CPU's model name as Linux reports it (None where it does not)."""
+    return _cpuinfo_field(("model name",), cpuinfo)
 
 
 @functools.lru_cache(maxsize=1)
