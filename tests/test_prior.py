@@ -315,3 +315,20 @@ def test_evaluation_on_the_attribute_corpus():
     assert 0 <= res["heldout_paraphrase_accuracy"] <= 1
     assert res["settings"]["corpus"] == 2 and fam["prompt"] == "a block with four legs"
     assert 0 <= fam["accuracy"] <= 1 and 0 <= fam["ceiling"] <= 1
+
+
+def test_compiled_training_trains_the_same_model(tmp_path):
+    """``compile=True`` runs the step through torch.compile; the weights it saves are the
+    plain model's and match eager training to float tolerance."""
+    cfg = TrainConfig(kind="base", steps=2, batch=2, subset=16, per_family=1, ckpt_every=2,
+                      log_every=1, warmup=1, bf16=False, model=ModelConfig(**TINY))
+    corpus = tmp_path / "corpus"
+    train(cfg, tmp_path / "eager", cache_dir=corpus, show_progress=False)
+    cfg.compile = True
+    train(cfg, tmp_path / "compiled", cache_dir=corpus, show_progress=False)
+    eager = torch.load(tmp_path / "eager" / "checkpoint.pt", weights_only=True)
+    compiled = torch.load(tmp_path / "compiled" / "checkpoint.pt", weights_only=True)
+    assert compiled["model"].keys() == eager["model"].keys()  # no "_orig_mod." prefixes
+    assert compiled["config"]["compile"] is True
+    for k, v in eager["model"].items():
+        torch.testing.assert_close(compiled["model"][k], v, rtol=1e-4, atol=1e-5)

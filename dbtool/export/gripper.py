@@ -92,12 +92,15 @@ def reach_root(finger, root: float, depth: float = 1.5) -> tuple[object, float]:
     That happens when the design's top sites hang from the body by a thread of single sites:
     the simulator's grid glues the thread to the base, but the mesh's largest piece does not
     include it. The continuation is the finger's own cross-section ``depth`` mm below its top,
-    extruded up to the base, so the printed finger can be glued where the simulated one is."""
+    extruded up to the base (0.3 mm inside its surface), so the printed finger can be glued
+    where the simulated one is."""
     top = finger.bounding_box()[4]
     if top >= root - 1e-3:
         return finger, 0.0
     y0 = top - depth
-    section = finger.rotate([90.0, 0.0, 0.0]).slice(y0)  # y becomes z: a horizontal section
+    # y becomes z: a horizontal section, kept 0.3 mm inside the surface so the column's walls
+    # cross the finger's instead of touching it (touching faces leave slivers an STL loses)
+    section = finger.rotate([90.0, 0.0, 0.0]).slice(y0).offset(-0.3, m3.JoinType.Round)
     column = section.extrude(root + 1.0 - y0).translate([0.0, 0.0, y0]).rotate([-90.0, 0.0, 0.0])
     joined = (finger + column).trim_by_plane([0.0, -1.0, 0.0], -root)
     return joined, float(root - top)

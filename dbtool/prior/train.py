@@ -57,6 +57,7 @@ class TrainConfig:
     seed: int = 0
     threads: int = 1
     bf16: bool | None = None  # bfloat16 autocast; None: where the CPU has it natively
+    compile: bool = False  # torch.compile the training forward (1.6x faster in float32 here)
     ckpt_every: int = 250
     log_every: int = 25
     model: ModelConfig = field(default_factory=ModelConfig)
@@ -248,6 +249,8 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path
         if cfg.steps < start:
             raise ValueError(f"{run_dir} is already at step {start}; --steps {cfg.steps} "
                              "would go back")
+    # compiled: fused kernels for the forward and backward (the weights stay ``model``'s)
+    fwd = torch.compile(model) if cfg.compile else model
     # the loss log holds exactly the steps the checkpoint has seen (a crash after the last
     # checkpoint leaves rows that the resumed run will write again)
     kept = [r for r in read_log(run.path) if r.get("step", 0) <= start]
@@ -274,7 +277,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path
         x0, cond, coarse = make_batch(cfg, clouds, cap_index, cap_count, emb, rng)
 
         def net(x, t, c, coarse=coarse):
-            return model(x, t, c, coarse)
+            return fwd(x, t, c, coarse)
 
         with torch.autocast("cpu", dtype=torch.bfloat16, enabled=use_bf16("cpu", cfg.bf16)):
             loss = diffusion_loss(schedule, net, x0, cond, gen,
