@@ -87,6 +87,14 @@ def _measured_limits(ev: dict) -> list[str]:
     return out
 
 
+def _splits(per: int, families: int, s: dict) -> str:
+    """The sentence on the corpus's training, reference and held-out splits."""
+    return (f"Splits are seeded and disjoint: training {per} shapes per family "
+            f"({per * families} clouds of 4,096 points), reference "
+            f"{s['reference_per_family']} per family and held-out {s['heldout_per_family']} "
+            "per family for evaluation only.")
+
+
 def _corpus_v2(per: int, s: dict) -> list[str]:
     """The corpus section of a model trained on the attribute corpus."""
     from dbtool.prior import corpus
@@ -103,10 +111,7 @@ def _corpus_v2(per: int, s: dict) -> list[str]:
         f"synonyms and word orders, e.g. {', '.join(repr(c) for c in caps[:4])}. Held out from "
         f"training: {len(HELDOUT_TEMPLATES)} templates, some synonyms and one attribute pair "
         "per family that training never words together.", "",
-        f"Splits are seeded and disjoint: training {per} shapes per family "
-        f"({per * len(corpus.FAMILIES)} clouds of 4,096 points), reference "
-        f"{s['reference_per_family']} per family and held-out {s['heldout_per_family']} per "
-        "family for evaluation only.", ""]
+        _splits(per, len(corpus.FAMILIES), s), ""]
 
 
 def _v2_quality(ev: dict) -> list[str]:
@@ -186,10 +191,7 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None,
         "canonical orientation). Captions: every name of a family (three per family, some with "
         f"a thin/thick adjective) in {len(caps) // 3} templates, e.g. "
         f"{', '.join(repr(c) for c in caps[:6])}.", "",
-        f"Splits are seeded and disjoint: training {per} shapes per family "
-        f"({per * len(shapes.FAMILIES)} clouds of 4,096 points), reference "
-        f"{s['reference_per_family']} per family and held-out {s['heldout_per_family']} per "
-        "family for evaluation only.", ""]
+        _splits(per, len(shapes.FAMILIES), s), ""]
     out += [
         "## Architecture", "", WHY.format(bf16=_bf16_note(bench)), "",
         "## Training", "",
