@@ -4,6 +4,7 @@ import subprocess
 import sys
 
 import numpy as np
+from cli_inprocess import run_cli
 
 from dbtool.design import Design
 from dbtool.robotize.actuators import reference_robot
@@ -57,7 +58,7 @@ def test_bad_input_is_one_line_and_nonzero(tmp_path):
         (("simulate", "crawling", "--design", str(tmp_path / "empty.npz")), "empty"),
     ]
     for args, message in cases:
-        out = _run(*args)
+        out = run_cli(*args)
         assert out.returncode != 0
         errors = [line for line in out.stderr.splitlines() if line.startswith("error:")]
         assert len(errors) == 1 and message in errors[0], out.stderr
@@ -65,7 +66,8 @@ def test_bad_input_is_one_line_and_nonzero(tmp_path):
 
 
 def test_design_then_export(tmp_path):
-    out = _run("design", "gripping", "--epochs", "1", "--samples", "1", "--steps", "4",
+    # no embedding epoch (the library tests run them): the sampler, co-design and the files
+    out = _run("design", "gripping", "--epochs", "0", "--samples", "1", "--steps", "4",
                cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     assert "final metric" in out.stdout
@@ -73,7 +75,7 @@ def test_design_then_export(tmp_path):
     assert len(found) == 1
     d = Design.load(found[0])
     assert d.task == "gripping" and d.controller.shape == (4, 2)
-    out = _run("export", "--stl", cwd=tmp_path)
+    out = _run("export", "--stl", "--no-slice", cwd=tmp_path)  # tests/test_slicer.py slices
     assert out.returncode == 0, out.stderr
     exp = tmp_path / "exports" / found[0].parent.name
     for name in ("finger", "finger_mirror", "base", "assembly"):
@@ -92,7 +94,7 @@ def test_particle_baseline_still_designs(tmp_path):
 
 
 def test_export_without_a_design_fails_cleanly(tmp_path):
-    out = _run("export", "--stl", cwd=tmp_path)
+    out = run_cli("export", "--stl", cwd=tmp_path)
     assert out.returncode != 0 and "no design found" in out.stderr
 
 
@@ -100,23 +102,23 @@ def test_export_bad_input(tmp_path):
     """Not a run directory, a design without robot fields, an output folder that cannot be
     made, an output folder that is a file."""
     (tmp_path / "notarun").mkdir()
-    out = _run("export", str(tmp_path / "notarun"))
+    out = run_cli("export", str(tmp_path / "notarun"))
     assert out.returncode != 0 and "holds no design.npz" in out.stderr
     np.savez(tmp_path / "cloud.npz", points=np.zeros((10, 3)))
-    out = _run("export", "--design", str(tmp_path / "cloud.npz"))
+    out = run_cli("export", "--design", str(tmp_path / "cloud.npz"))
     assert out.returncode != 0 and "lacks header" in out.stderr
     task = get_task("crawling")
     Design("crawling", reference_robot(task, "box"), task.controller()).save(tmp_path / "d.npz")
     (tmp_path / "afile").write_text("x")
     before = sorted(tmp_path.iterdir())
     # a folder that cannot be made, for root too: a regular file stands where its parent goes
-    out = _run("export", "--design", str(tmp_path / "d.npz"), "--out",
+    out = run_cli("export", "--design", str(tmp_path / "d.npz"), "--out",
                str(tmp_path / "afile" / "export"))
     assert out.returncode != 0, out.stdout
     assert len(out.stderr.strip().splitlines()) == 1, out.stderr  # one line, no traceback
     assert out.stderr.startswith("error:") and "afile is a file" in out.stderr, out.stderr
     assert sorted(tmp_path.iterdir()) == before  # nothing written, not even a partial folder
-    out = _run("export", "--design", str(tmp_path / "d.npz"), "--out", str(tmp_path / "afile"))
+    out = run_cli("export", "--design", str(tmp_path / "d.npz"), "--out", str(tmp_path / "afile"))
     assert out.returncode != 0 and out.stderr.startswith("error:"), out.stderr
     assert "Traceback" not in out.stderr
     assert (tmp_path / "afile").read_text() == "x"

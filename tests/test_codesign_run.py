@@ -8,6 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
+from cli_inprocess import run_cli
 
 from dbtool.codesign import design_run as run_mod
 from dbtool.codesign.config import CodesignConfig, preset
@@ -226,7 +227,7 @@ def test_design_cli_bad_input_fails_cleanly(tmp_path):
              (("design", "crawling", "--resume", str(tmp_path / "run")), "corrupt checkpoint"),
              (("design", "crawling", "--method", "magic"), "unknown method")]
     for args, msg in cases:
-        out = _cli(*args, cwd=tmp_path)
+        out = run_cli(*args, cwd=tmp_path)
         assert out.returncode != 0, args
         assert msg in out.stderr, (args, out.stderr[-400:])
         assert "Traceback" not in out.stderr

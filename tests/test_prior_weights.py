@@ -7,6 +7,7 @@ import sys
 import numpy as np
 import pytest
 import torch
+from cli_inprocess import run_cli
 
 from dbtool.pointcloud import load_ply
 from dbtool.prior.evaluate import evaluate
@@ -90,7 +91,7 @@ def test_generate_writes_clouds_npz_and_grid(tmp_path):
 ])
 def test_generate_bad_input_is_one_line(tmp_path, args, message):
     args = [str(tmp_path / "o") if a == "OUT" else a for a in args]
-    out = _generate(*args, cwd=tmp_path)
+    out = run_cli("generate", *args, cwd=tmp_path)
     assert out.returncode != 0
     errors = [line for line in out.stderr.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and message in errors[0], out.stderr

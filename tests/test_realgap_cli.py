@@ -4,6 +4,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from cli_inprocess import run_cli
+
 from dbtool.design import Design
 from dbtool.robotize.actuators import reference_robot
 from dbtool.sim.tasks import get_task
@@ -54,7 +56,7 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path):
           str(tmp_path / "nope.json"), "-o", str(tmp_path / "r4")), "log.csv:3:"),
     ]
     for args, message in cases:
-        _one_error(_run(*args), message)
+        _one_error(run_cli("realgap", *args), message)
     left = sorted(p.name for p in tmp_path.iterdir())
     assert left == ["a-file", "crawler.npz", "log.csv"], left
 

@@ -4,6 +4,7 @@ import subprocess
 import sys
 
 import numpy as np
+from cli_inprocess import run_cli
 
 from dbtool.design import Design
 from dbtool.pointcloud import save_ply
@@ -63,7 +64,7 @@ def test_robotize_bad_input_is_one_line_and_writes_nothing(tmp_path):
     for args, message in cases:
         target = tmp_path / "out.npz"
         extra = () if "-o" in args else ("-o", str(target))
-        out = _run("robotize", *args, *extra)
+        out = run_cli("robotize", *args, *extra)
         assert out.returncode != 0
         errors = [line for line in out.stderr.splitlines() if line.startswith("error:")]
         assert len(errors) == 1 and message in errors[0], (args, out.stderr)

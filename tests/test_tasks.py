@@ -131,7 +131,7 @@ def test_empty_body_is_a_clear_error():
         robot_from_occupancy(task, np.zeros(len(task.design_points())))
 
 
-RANDOM_BODIES = 10  # per task, 100-step episodes: 60 random bodies in all (~2.5 min of CI)
+RANDOM_BODIES = 4  # per task, 100-step episodes: 24 random bodies in all (~3 min of CI)
 
 
 @pytest.mark.parametrize("name", list(TASKS))
