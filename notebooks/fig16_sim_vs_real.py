@@ -30,7 +30,7 @@
 # printed gripper, the same calls apply.
 #
 # Quick mode (`DBTOOL_QUICK=1`, used in CI) uses the flexion tendon's readings only and fits
-# gain and channel friction in at most 4 gradient evaluations; unset, both tendons, the
+# the gain alone in at most 3 gradient evaluations; unset, both tendons, the
 # stiffness scale too, and up to 20 evaluations.
 
 # %%
@@ -50,8 +50,8 @@ from dbtool.realgap.run import open_bench, summary
 
 QUICK = os.environ.get("DBTOOL_QUICK", "0") == "1"
 TENDONS = ("flexion",) if QUICK else ("flexion", "extension")
-FIT = ("gain", "friction_mm") if QUICK else ("gain", "stiffness_scale", "friction_mm")
-MAX_EVALS = 4 if QUICK else 20
+FIT = ("gain",) if QUICK else ("gain", "stiffness_scale", "friction_mm")
+MAX_EVALS = 3 if QUICK else 20
 REFERENCE = Path("../exports/gripping-seed0")
 out = Path(tempfile.mkdtemp(prefix="fig16-"))
 bench, meta = open_bench(REFERENCE)

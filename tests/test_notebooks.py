@@ -8,6 +8,7 @@ import manifold3d as m3
 import pytest
 
 from dbtool.codesign.config import preset
+from dbtool.sim.tasks import TASKS
 
 ROOT = Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("build_notebooks", ROOT / "docs/build_notebooks.py")
@@ -31,20 +32,24 @@ def test_pair_in_sync(source):
 QUICK_SETTINGS = {
     "fig03_tasks": [("STEPS", 30, 100)],
     "fig04_embedding_optimisation": [
-        ("N_STEPS", 20, 100), ("settings('crawling').epochs", 2, 4),
+        ("N_STEPS", 20, 100), ("RUN", ("crawling", "gripping"), tuple(TASKS)),
+        ("settings('crawling').epochs", 2, 4),
         ("settings('crawling').samples_per_epoch", 4, 12),
         ("settings('crawling').sample_steps", 16, 32)],
     "fig05_motion_montage": [
         ("SIZES", {"epochs": 1, "samples_per_epoch": 4, "sample_steps": 16, "samples": 1,
-                   "n_steps": 10}, {}), ("UPSAMPLE", False, True)],
+                   "n_steps": 10}, {}), ("UPSAMPLE", False, True),
+        ("RUN", ("crawling", "gripping"), tuple(TASKS))],
     "fig08_robotizing": [("len(FAMILIES)", 2, 3), ("STEPS", 10, 100), ("ITERS", 2, 5)],
     "fig11_diffusion_process": [("N", 1, 2), ("STEPS", 32, 64), ("len(US)", 4, 6)],
     "fig13_text_feedback": [
-        ("N_STEPS", 10, 100), ("SAMPLE_STEPS", 16, 32), ("cod.t_max", 100, 400)],
+        ("N_STEPS", 10, 100), ("SAMPLE_STEPS", 16, 32), ("cod.t_max", 100, 400),
+        ("[p[0] for p in PAIRS]", ["crawling", "box"],
+         ["balancing", "crawling", "hurdling", "box"])],
     "fig14_fabrication": [("finger.bounding_box()[4] - finger.bounding_box()[1]", 20.0, 60.0)],
     "fig16_sim_vs_real": [("TENDONS", ("flexion",), ("flexion", "extension")),
-                          ("FIT", ("gain", "friction_mm"),
-                           ("gain", "stiffness_scale", "friction_mm")), ("MAX_EVALS", 4, 20)],
+                          ("FIT", ("gain",), ("gain", "stiffness_scale", "friction_mm")),
+                          ("MAX_EVALS", 3, 20)],
     "fig12_baselines": [("TASKS", ("crawling",), ("crawling", "gripping", "hurdling")),
                         ("BUDGET", "smoke", "smoke")],
     "table_main": [("TASKS", ("crawling", "gripping"),
