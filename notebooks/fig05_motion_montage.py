@@ -59,40 +59,37 @@ root = Path(tempfile.mkdtemp(prefix="fig05-"))
 # the final robot with its co-optimised controller) and the epoch means.
 
 # %%
-def design(name: str):
-    """One `quick` design run of task ``name`` (one cell per task keeps each cell short)."""
+def design(name: str) -> None:
+    """One `quick` design run of task ``name`` into ``results`` when ``name`` is in ``RUN``
+    (one cell per task keeps each cell short)."""
+    if name not in RUN:
+        return
     run = DesignRun(root / name, Settings(name, "quick", seed=0, **SIZES), prior)
     run.start("cpu")
     final = run.run(show_progress=False)
     epochs = [r for r in run.state.rows if r["phase"] == "embedding"]
-    return final, run.path, [round(r["mean"], 5) for r in epochs]
+    results[name] = final, run.path, [round(r["mean"], 5) for r in epochs]
 
 
 results = {}
 
 # %%
-if "balancing" in RUN:
-    results["balancing"] = design("balancing")
+design("balancing")
 
 # %%
-if "landing" in RUN:
-    results["landing"] = design("landing")
+design("landing")
 
 # %%
-if "crawling" in RUN:
-    results["crawling"] = design("crawling")
+design("crawling")
 
 # %%
-if "hurdling" in RUN:
-    results["hurdling"] = design("hurdling")
+design("hurdling")
 
 # %%
-if "gripping" in RUN:
-    results["gripping"] = design("gripping")
+design("gripping")
 
 # %%
-if "box" in RUN:
-    results["box"] = design("box")
+design("box")
 
 # %%
 assert list(results) == list(RUN)
