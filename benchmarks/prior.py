@@ -24,6 +24,7 @@ Usage::
     python benchmarks/prior.py               # ~5 minutes on 2 cores
     python benchmarks/prior.py --quick       # smoke test: batch 1 and 4, 8 steps
     python benchmarks/prior.py --threads 1 --out /tmp/prior.json
+    python benchmarks/prior.py --version 2  # another shipped version's weights
 """
 
 from __future__ import annotations
@@ -58,17 +59,18 @@ def _reset_peak() -> None:
         pass
 
 
-def train_steps(batch: int, points: int, repeats: int) -> dict:
+def train_steps(batch: int, points: int, repeats: int, version: int | None = None) -> dict:
     """Seconds per training step of the base model, bf16 autocast and float32 (one thread)."""
     import torch
 
     from dbtool.prior.diffusion import diffusion_loss
     from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
-    from dbtool.prior.pipeline import BASE_WEIGHTS, load_model
+    from dbtool.prior.pipeline import BASE_WEIGHTS, load_model, weights_dir
     from dbtool.prior.schedulers import NoiseSchedule
 
     torch.set_num_threads(1)
-    cfg = ModelConfig(**load_model(BASE_WEIGHTS)[1]["model"])
+    path = BASE_WEIGHTS if version is None else weights_dir(version) / "base.pt"
+    cfg = ModelConfig(**load_model(path)[1]["model"])
     model = PointDiffusionTransformer(cfg)
     opt = torch.optim.AdamW(model.parameters(), 1e-4)
     schedule = NoiseSchedule.cosine()
@@ -89,7 +91,8 @@ def train_steps(batch: int, points: int, repeats: int) -> dict:
     return out
 
 
-def worker(kind: str, batch: int, steps: int, repeats: int, threads: int | None) -> dict:
+def worker(kind: str, batch: int, steps: int, repeats: int, threads: int | None,
+           version: int | None = None) -> dict:
     """Run one case in this process and return its numbers."""
     import numpy as np
     import torch
@@ -98,14 +101,14 @@ def worker(kind: str, batch: int, steps: int, repeats: int, threads: int | None)
     from dbtool.prior.pipeline import Prior
 
     if kind == "train":
-        t = train_steps(batch, steps, max(repeats, 5))
+        t = train_steps(batch, steps, max(repeats, 5), version)
         return {"kind": "train", "batch": batch, "steps": steps, "seconds": t["bf16"],
                 "samples_per_s": batch / t["bf16"], "fp32_seconds": t["fp32"],
                 "bf16_speedup": t["fp32"] / t["bf16"], "peak_mib": float("nan"), "threads": 1,
                 "repeats": max(repeats, 5)}
     if threads:
         torch.set_num_threads(threads)
-    prior = Prior.load(with_upsampler=kind == "upsampler")
+    prior = Prior.load(with_upsampler=kind == "upsampler", version=version)
     emb = prior.embed("a star")  # the text encoder is not part of the timed loop
     coarse = np.random.default_rng(0).uniform(-0.4, 0.4, (batch, 1024, 3)).astype(np.float32)
     base_rss = _rss("VmRSS")
@@ -136,18 +139,21 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeats", type=int, default=None, help="timed runs per case (default 3)")
     p.add_argument("--threads", type=int, default=None, help="torch threads (default: all)")
     p.add_argument("--out", type=Path, default=None, help="JSON output path")
+    p.add_argument("--version", type=int, default=None,
+                   help="shipped prior version (default: the default one)")
     p.add_argument("--worker", nargs=3, metavar=("KIND", "BATCH", "STEPS"), help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     repeats = a.repeats or (1 if a.quick else 3)
     if a.worker:
         kind, batch, steps = a.worker[0], int(a.worker[1]), int(a.worker[2])
-        print(json.dumps(worker(kind, batch, steps, repeats, a.threads)))
+        print(json.dumps(worker(kind, batch, steps, repeats, a.threads, a.version)))
         return 0
 
     rows = []
     for kind, batch, steps in QUICK_CASES if a.quick else CASES:
         cmd = [sys.executable, __file__, "--worker", kind, str(batch), str(steps),
-               "--repeats", str(repeats)] + (["--threads", str(a.threads)] if a.threads else [])
+               "--repeats", str(repeats)] + (["--threads", str(a.threads)] if a.threads else []) + (
+            ["--version", str(a.version)] if a.version is not None else [])
         out = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
         if out.returncode != 0:
             print(out.stderr[-2000:], file=sys.stderr)
@@ -183,7 +189,8 @@ def main(argv: list[str] | None = None) -> int:
     from _results import write_result
 
     config = {"benchmark": "prior", "cases": QUICK_CASES if a.quick else CASES,
-              "repeats": repeats, "threads": a.threads, "quick": a.quick}
+              "repeats": repeats, "threads": a.threads, "quick": a.quick,
+              "prior_version": a.version}
     write_result({"goal_epoch_s": GOAL_EPOCH_S, "cases": rows}, a.out, DEFAULT_OUT, a.quick,
                  config)  # the provenance's machine records bf16_native
     return 0

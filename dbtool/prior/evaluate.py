@@ -84,7 +84,8 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
              interpolate: bool = True, log: Callable[[str], object] | None = print,
              reference_families: list[str] | None = None, eta: float = 1.0,
              heldout_per_family: int = HELDOUT_PER_FAMILY,
-             metric_points: int = METRIC_POINTS, version: int = 1) -> dict:
+             metric_points: int = METRIC_POINTS, version: int = 1,
+             reference_per_family: int = REF_PER_FAMILY) -> dict:
     """All quality metrics of the model card; numbers per family and overall.
 
     ``families`` are the families prompted; the reference set covers ``reference_families``
@@ -98,14 +99,14 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
     if missing:
         raise ValueError(f"families without references: {', '.join(sorted(missing))}")
     t0 = time.perf_counter()
-    ref, ref_lab = real_set("reference", REF_PER_FAMILY, ref_fams, points=metric_points,
+    ref, ref_lab = real_set("reference", reference_per_family, ref_fams, points=metric_points,
                             version=version)
     held, held_lab = real_set("heldout", heldout_per_family, fams, points=metric_points,
                               version=version)
     ceiling = one_nn_accuracy(chamfer_matrix(held, ref), held_lab, ref_lab)
     res: dict = {"families": {}, "settings": {
         "samples": samples, "steps": steps, "guidance": guidance, "seed": seed, "eta": eta,
-        "reference_per_family": REF_PER_FAMILY, "heldout_per_family": heldout_per_family,
+        "reference_per_family": reference_per_family, "heldout_per_family": heldout_per_family,
         "metric_points": metric_points, "corpus": version}}
     sched = scheduler_for(eta, prior.scheduler.schedule)
     accs = []
