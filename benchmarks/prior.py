@@ -59,18 +59,17 @@ def _reset_peak() -> None:
         pass
 
 
-def train_steps(batch: int, points: int, repeats: int, version: int | None = None) -> dict:
+def train_steps(batch: int, points: int, repeats: int, version: int) -> dict:
     """Seconds per training step of the base model, bf16 autocast and float32 (one thread)."""
     import torch
 
     from dbtool.prior.diffusion import diffusion_loss
     from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
-    from dbtool.prior.pipeline import BASE_WEIGHTS, load_model, weights_dir
+    from dbtool.prior.pipeline import load_model, weights_dir
     from dbtool.prior.schedulers import NoiseSchedule
 
     torch.set_num_threads(1)
-    path = BASE_WEIGHTS if version is None else weights_dir(version) / "base.pt"
-    cfg = ModelConfig(**load_model(path)[1]["model"])
+    cfg = ModelConfig(**load_model(weights_dir(version) / "base.pt")[1]["model"])
     model = PointDiffusionTransformer(cfg)
     opt = torch.optim.AdamW(model.parameters(), 1e-4)
     schedule = NoiseSchedule.cosine()
@@ -92,7 +91,7 @@ def train_steps(batch: int, points: int, repeats: int, version: int | None = Non
 
 
 def worker(kind: str, batch: int, steps: int, repeats: int, threads: int | None,
-           version: int | None = None) -> dict:
+           version: int) -> dict:
     """Run one case in this process and return its numbers."""
     import numpy as np
     import torch
@@ -134,13 +133,15 @@ def worker(kind: str, batch: int, steps: int, repeats: int, threads: int | None,
 
 
 def main(argv: list[str] | None = None) -> int:
+    from dbtool.prior.pipeline import DEFAULT_VERSION
+
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="tiny cases (smoke test)")
     p.add_argument("--repeats", type=int, default=None, help="timed runs per case (default 3)")
     p.add_argument("--threads", type=int, default=None, help="torch threads (default: all)")
     p.add_argument("--out", type=Path, default=None, help="JSON output path")
-    p.add_argument("--version", type=int, default=None,
-                   help="shipped prior version (default: the default one)")
+    p.add_argument("--version", type=int, default=DEFAULT_VERSION,
+                   help=f"shipped prior version (default {DEFAULT_VERSION})")
     p.add_argument("--worker", nargs=3, metavar=("KIND", "BATCH", "STEPS"), help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     repeats = a.repeats or (1 if a.quick else 3)
@@ -152,8 +153,8 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for kind, batch, steps in QUICK_CASES if a.quick else CASES:
         cmd = [sys.executable, __file__, "--worker", kind, str(batch), str(steps),
-               "--repeats", str(repeats)] + (["--threads", str(a.threads)] if a.threads else []) + (
-            ["--version", str(a.version)] if a.version is not None else [])
+               "--repeats", str(repeats), "--version", str(a.version)] + (
+            ["--threads", str(a.threads)] if a.threads else [])
         out = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
         if out.returncode != 0:
             print(out.stderr[-2000:], file=sys.stderr)
