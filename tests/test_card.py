@@ -54,3 +54,15 @@ def test_version_1_card_is_unchanged_by_the_version_2_sections():
     text = card.render(meta, None, v1, None)
     assert "Attribute control" not in text and "Held-out phrasings" not in text
     assert "(version" not in text.splitlines()[0]
+
+
+def test_version_2_card_reports_its_threads_and_training_curve():
+    _, meta = load_model(weights_dir(2) / "base.pt")
+    log = [{"step": 25 * (i + 1), "loss": 1.0 / (i + 1), "lr": 1e-3, "elapsed_s": 60.0 * (i + 1)}
+           for i in range(16)]
+    text = card.render(meta, None, _eval_v2(), None, curve=log)
+    threads = meta["train_config"]["threads"]
+    assert f"The base model: {threads} CPU thread(s)" in text
+    assert "One CPU thread each" not in text
+    assert "loss logged every 25 steps" in text
+    assert "| 25-50 | 0.7500 | 2 min |" in text and "| 375-400 |" in text

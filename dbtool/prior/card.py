@@ -60,6 +60,34 @@ def _training_rows(metas: dict[str, dict]) -> list[str]:
     return rows
 
 
+def _curve(log: list[dict], points: int = 8) -> list[str]:
+    """The training curve of a run's ``metrics.jsonl``: mean loss of ``points`` equal windows,
+    with the step and wall time at each window's end."""
+    if not log:
+        return []
+    rows = ["| steps | mean loss | wall time at the end |", "|---|---:|---:|"]
+    size = max(1, len(log) // points)
+    for i in range(0, len(log), size):
+        w = log[i: i + size]
+        rows.append(f"| {w[0]['step']}-{w[-1]['step']} | {sum(r['loss'] for r in w) / len(w):.4f}"
+                    f" | {w[-1]['elapsed_s'] / 60:.0f} min |")
+    return ["Training curve of the base model (its `metrics.jsonl`; loss logged every "
+            f"{log[1]['step'] - log[0]['step'] if len(log) > 1 else log[0]['step']} steps):", "",
+            *rows, ""]
+
+
+def _threads(metas: dict[str, dict]) -> str:
+    """How the models were trained, from their configurations."""
+    if all(m["train_config"].get("threads", 1) == 1 for m in metas.values()) and len(metas) == 2:
+        return ("One CPU thread each, the two models trained at the same time on the two "
+                "cores.")
+    return " ".join(
+        f"The {k} model: {m['train_config'].get('threads', 1)} CPU thread(s)"
+        + (", torch.compile" if m["train_config"].get("compile") else "")
+        + " (its last run's configuration; runs resume after an interruption)." for k, m in
+        metas.items())
+
+
 def _quality_rows(ev: dict) -> list[str]:
     rows = ["| family | prompt | 1-NN accuracy | ceiling (real held-out) | 1-NNA (0.5 ideal) | "
             "spread gen/real | extent |", "|---|---|---:|---:|---:|---:|---:|"]
@@ -167,10 +195,12 @@ def _against_v1(old: dict, new: dict) -> list[str]:
 
 
 def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None,
-           old: tuple[dict, dict] | None = None) -> str:
+           old: tuple[dict, dict] | None = None, curve: list[dict] | None = None) -> str:
     """The card's markdown. ``old``: version 1's evaluation and this model's on version 1's
-    families (the numbers the default switch is decided on)."""
+    families (the numbers the default switch is decided on); ``curve``: the base model's
+    training log."""
     s = ev["settings"]
+    metas = {"base": base_meta, **({"upsampler": up_meta} if up_meta else {})}
     fams = list(ev["families"])
     per = base_meta["train_config"]["per_family"]
     version = int(s.get("corpus", 1))
@@ -198,9 +228,8 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None,
         "Diffusion as in Point-E: 1,024 steps, cosine schedule (base) and linear (upsampler), "
         "epsilon prediction, clouds scaled x2 into the model, the condition dropped with "
         "p = 0.1 for classifier-free guidance. AdamW, warm-up then cosine decay, gradient "
-        "clipping at 1, EMA weights shipped. One CPU thread each, the two models trained at "
-        "the same time on the two cores.", "",
-        *_training_rows({"base": base_meta, **({"upsampler": up_meta} if up_meta else {})}), "",
+        "clipping at 1, EMA weights shipped. " + _threads(metas), "",
+        *_training_rows(metas), "", *_curve(curve or []),
         "## Quality", "",
         f"Settings: {s['samples']} samples per family from its prompt, "
         f"{'strided DDPM' if s.get('eta', 0) == 1 else 'DDIM'} with {s['steps']} steps, "
@@ -250,7 +279,7 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None,
         "## Reproduce", "", "```bash",
         f"dbtool prior train --kind base{corpus_flag}          # --resume continues after an "
         "interruption",
-        "dbtool prior train --kind upsampler",
+        f"dbtool prior train --kind upsampler{corpus_flag}",
         f"dbtool prior export runs/prior/base -o dbtool/prior/weights/v{version}/base.pt",
         f"dbtool prior export runs/prior/upsampler -o dbtool/prior/weights/v{version}/"
         "upsampler.pt",
@@ -282,6 +311,7 @@ def main(argv: list[str] | None = None) -> None:
                    help="version 1's evaluation and this model's on corpus 1")
     p.add_argument("--bench", type=Path,
                    default=Path(__file__).parents[2] / "benchmarks/results/legacy/prior.json")
+    p.add_argument("--log", type=Path, help="the base run's metrics.jsonl (training curve)")
     p.add_argument("--out", type=Path, help="default: MODEL_CARD.md (version 1) or "
                    "weights/vN/MODEL_CARD.md")
     a = p.parse_args(argv)
@@ -293,7 +323,9 @@ def main(argv: list[str] | None = None) -> None:
     up = load_model(up_path)[1] if up_path.is_file() else None
     bench = json.loads(a.bench.read_text()) if a.bench.is_file() else None
     old = tuple(json.loads(f.read_text()) for f in a.old) if a.old else None
-    text = render(base, up, json.loads(a.eval.read_text()), bench, old)
+    curve = ([json.loads(x) for x in a.log.read_text().splitlines() if x.strip()]
+             if a.log else None)
+    text = render(base, up, json.loads(a.eval.read_text()), bench, old, curve)
     tmp = out.with_suffix(".tmp")
     tmp.write_text(text)
     tmp.replace(out)
