@@ -143,32 +143,38 @@ def attribute_prompts(families: list[str] | None = None) -> list[dict]:
     return rows
 
 
+def _fresh(name: str, compute: Callable[[], dict]) -> dict:
+    return compute()
+
+
 def attribute_control(prior, rows: list[dict], n: int = 4, seed: int = 0, steps: int = 32,
-                      guidance: float = 3.0) -> list[dict]:
+                      guidance: float = 3.0, parts: Callable = _fresh) -> list[dict]:
     """Sample ``n`` clouds of each row's low and high prompt from the same noise and measure
-    the attribute: a pair is right when the high prompt's cloud measures higher."""
-    out = []
-    for r in rows:
+    the attribute: a pair is right when the high prompt's cloud measures higher. ``parts``
+    (``dbtool.prior.evaluate.Parts.get``) keeps finished rows for a resumed evaluation."""
+    def row(r: dict) -> dict:
         lo = prior.sample(r["low"], n=n, guidance=guidance, steps=steps, seed=seed).clouds
         hi = prior.sample(r["high"], n=n, guidance=guidance, steps=steps, seed=seed).clouds
         m = MEASURES[r["attribute"]]
-        ml, mh = [m(c) for c in lo], [m(c) for c in hi]
-        out.append({**r, "low_values": ml, "high_values": mh,
-                    "right": int(sum(b > a for a, b in zip(ml, mh, strict=True))), "pairs": n})
-    return out
+        ml, mh = [float(m(c)) for c in lo], [float(m(c)) for c in hi]
+        return {**r, "low_values": ml, "high_values": mh,
+                "right": int(sum(b > a for a, b in zip(ml, mh, strict=True))), "pairs": n}
+
+    return [parts(f"attribute/{r['family']}/{r['attribute']}", lambda r=r: row(r))
+            for r in rows]
 
 
 def legs_control(prior, bodies=("block", "ball", "disk"), counts=(3, 4, 6), n: int = 4,
-                 seed: int = 0, steps: int = 32, guidance: float = 3.0) -> list[dict]:
+                 seed: int = 0, steps: int = 32, guidance: float = 3.0,
+                 parts: Callable = _fresh) -> list[dict]:
     """"a BODY with N legs": how many of ``n`` samples stand on exactly N separate contacts."""
     from dbtool.prior.words import NUMBERS
 
-    out = []
-    for body in bodies:
-        for k in counts:
-            prompt = f"a {body} with {NUMBERS[k]} legs"
-            clouds = prior.sample(prompt, n=n, guidance=guidance, steps=steps, seed=seed).clouds
-            found = [legs(c) for c in clouds]
-            out.append({"prompt": prompt, "legs": k, "found": found,
-                        "right": int(sum(f == k for f in found)), "samples": n})
-    return out
+    def row(prompt: str, k: int) -> dict:
+        clouds = prior.sample(prompt, n=n, guidance=guidance, steps=steps, seed=seed).clouds
+        found = [int(legs(c)) for c in clouds]
+        return {"prompt": prompt, "legs": k, "found": found,
+                "right": int(sum(f == k for f in found)), "samples": n}
+
+    prompts = [(f"a {body} with {NUMBERS[k]} legs", k) for body in bodies for k in counts]
+    return [parts(f"legs/{p}", lambda p=p, k=k: row(p, k)) for p, k in prompts]

@@ -69,8 +69,9 @@ def prior_evaluate(
                                         "attribute prompt pair and per legs prompt"),
 ) -> None:
     """Prompt fidelity (1-NN Chamfer), its ceiling, paraphrases, diversity, interpolation;
-    on corpus 2 also held-out phrasings, attribute control and part counts."""
-    from dbtool.prior.evaluate import evaluate
+    on corpus 2 also held-out phrasings, attribute control and part counts. Finished pieces
+    are kept in OUT's ``.parts.json``: an interrupted evaluation resumes there."""
+    from dbtool.prior.evaluate import Parts, evaluate, weights_digest
     from dbtool.prior.pipeline import Prior
     from dbtool.runs import write_json
 
@@ -78,17 +79,27 @@ def prior_evaluate(
         prior = Prior.load(base, with_upsampler=False)
         if corpus not in (1, 2):
             raise ValueError(f"unknown corpus version {corpus}: 1 or 2")
+        parts = Parts(out.with_name(out.stem + ".parts.json"), {
+            "weights": weights_digest(prior.base), "samples": samples, "steps": steps,
+            "guidance": guidance, "families": families or None, "corpus": corpus,
+            "attribute_pairs": attribute_pairs if corpus == 2 else None})
+        if parts.loaded:
+            typer.echo(f"resuming: {parts.loaded} finished pieces in {parts.path}")
         res = evaluate(prior, families or None, samples, steps, guidance, log=typer.echo,
-                       version=corpus)
+                       version=corpus, parts=parts.get)
         if corpus == 2:
             from dbtool.attributes import attribute_control, attribute_prompts, legs_control
 
             res["attributes"] = attribute_control(prior, attribute_prompts(families or None),
-                                                  n=attribute_pairs, guidance=guidance)
+                                                  n=attribute_pairs, guidance=guidance,
+                                                  parts=parts.get)
             right = sum(r["right"] for r in res["attributes"])
             res["attribute_accuracy"] = right / sum(r["pairs"] for r in res["attributes"])
-            res["legs"] = legs_control(prior, n=attribute_pairs, guidance=guidance)
+            res["legs"] = legs_control(prior, n=attribute_pairs, guidance=guidance,
+                                       parts=parts.get)
             typer.echo(f"attribute control: {res['attribute_accuracy']:.2f} of pairs right")
+        res["resumed_pieces"] = parts.loaded
         write_json(out, res)
+        parts.path.unlink()
     typer.echo(f"accuracy {res['accuracy']:.3f} (lowest family {res['min_accuracy']:.2f}, "
                f"ceiling {res['ceiling']:.3f}) -> {out}")

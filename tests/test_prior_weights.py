@@ -120,3 +120,30 @@ def test_a_far_prompt_names_the_nearest_known_captions():
     assert len(near) == 3 and near[0][1] < KNOWN and near[0][1] >= near[2][1]
     note = far_prompt_note("a teapot")
     assert note.startswith("note: 'a teapot' is far") and repr(near[0][0]) in note
+
+
+def test_an_interrupted_evaluation_resumes_to_the_same_numbers(prior, tmp_path):
+    """Every finished piece is kept; a resumed evaluation recomputes only the missing ones and
+    gives the numbers of an uninterrupted run; another key is refused."""
+    import json
+
+    from dbtool.prior.evaluate import Parts, weights_digest
+
+    kw = dict(families=["ball", "bar"], reference_families=["ball", "bar", "ring"], samples=2,
+              steps=2, log=None, heldout_per_family=2, metric_points=64,
+              reference_per_family=2)
+    key = {"weights": weights_digest(prior.base), "samples": 2}
+    path = tmp_path / "eval.parts.json"
+    full = evaluate(prior, parts=Parts(path, key).get, **kw)
+    saved = json.loads(path.read_text())["parts"]
+    assert {"ceiling", "family/ball", "family/bar", "paraphrase/a doughnut",
+            "interpolation/bar/ring"} <= saved.keys()
+    del saved["family/bar"], saved["interpolation/bar/ring"]  # as if it stopped there
+    path.write_text(json.dumps({"key": key, "parts": saved}))
+    parts = Parts(path, key)
+    assert parts.loaded == len(saved)
+    resumed = evaluate(prior, parts=parts.get, **kw)
+    for k in ("accuracy", "ceiling", "families", "paraphrases", "interpolations"):
+        assert resumed[k] == full[k], k
+    with pytest.raises(ValueError, match="other settings or weights"):
+        Parts(path, {**key, "samples": 3})

@@ -8,8 +8,11 @@ tests. Reference shapes come from the corpus's ``reference`` split and the ceili
 from __future__ import annotations
 
 import functools
+import hashlib
+import json
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -43,6 +46,48 @@ INTERPOLATIONS = (("ball", "star"), ("bar", "ring"), ("table", "pyramid"))  # fa
 # that differ in one attribute)
 INTERPOLATIONS_V2 = INTERPOLATIONS + (("block", "legged_block"), ("cylinder", "cone"),
                                       ("disk", "bowl"), ("finger", "hook"), ("bar", "wedge"))
+
+
+Compute = Callable[[str, Callable[[], dict]], dict]
+
+
+class Parts:
+    """The finished pieces of an evaluation in a JSON file, so an interrupted evaluation
+    resumes where it stopped (every piece is seeded on its own: a resumed run gives the same
+    numbers). ``key`` (settings and weights) must match the file's."""
+
+    def __init__(self, path: Path | None, key: dict) -> None:
+        self.path, self.key, self.done = path, key, {}
+        if path is not None and path.is_file():
+            saved = json.loads(path.read_text())
+            if saved.get("key") != key:
+                raise ValueError(f"{path} holds an evaluation with other settings or weights: "
+                                 "delete it or choose another --out")
+            self.done = saved["parts"]
+        self.loaded = len(self.done)
+
+    def get(self, name: str, compute: Callable[[], dict]) -> dict:
+        """The piece ``name``: from the file, or computed and saved (atomically)."""
+        if name not in self.done:
+            self.done[name] = compute()
+            if self.path is not None:
+                from dbtool.runs import write_json
+
+                write_json(self.path, {"key": self.key, "parts": self.done})
+        return self.done[name]
+
+
+def weights_digest(model: torch.nn.Module) -> str:
+    """A short hash of a model's parameters (which weights an evaluation measured)."""
+    h = hashlib.sha256()
+    for k, v in sorted(model.state_dict().items()):
+        h.update(k.encode())
+        h.update(v.detach().float().numpy().tobytes())
+    return h.hexdigest()[:16]
+
+
+def _fresh(name: str, compute: Callable[[], dict]) -> dict:
+    return compute()
 
 
 @functools.lru_cache(maxsize=2)
@@ -85,12 +130,13 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
              reference_families: list[str] | None = None, eta: float = 1.0,
              heldout_per_family: int = HELDOUT_PER_FAMILY,
              metric_points: int = METRIC_POINTS, version: int = 1,
-             reference_per_family: int = REF_PER_FAMILY) -> dict:
+             reference_per_family: int = REF_PER_FAMILY, parts: Compute = _fresh) -> dict:
     """All quality metrics of the model card; numbers per family and overall.
 
     ``families`` are the families prompted; the reference set covers ``reference_families``
     (default: every family), so a sample can be mistaken for any of them. The ceiling is the
-    same 1-NN rule applied to real held-out shapes of the prompted families.
+    same 1-NN rule applied to real held-out shapes of the prompted families. ``parts``
+    (:meth:`Parts.get`) keeps every finished piece, so the evaluation can resume.
     """
     all_fams = list(corpus_module(version).FAMILIES)
     fams = families or all_fams
@@ -103,47 +149,53 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
                             version=version)
     held, held_lab = real_set("heldout", heldout_per_family, fams, points=metric_points,
                               version=version)
-    ceiling = one_nn_accuracy(chamfer_matrix(held, ref), held_lab, ref_lab)
+    ceiling = np.asarray(parts("ceiling", lambda: {"per_shape": one_nn_accuracy(
+        chamfer_matrix(held, ref), held_lab, ref_lab).tolist()})["per_shape"])
     res: dict = {"families": {}, "settings": {
         "samples": samples, "steps": steps, "guidance": guidance, "seed": seed, "eta": eta,
         "reference_per_family": reference_per_family, "heldout_per_family": heldout_per_family,
         "metric_points": metric_points, "corpus": version}}
     sched = scheduler_for(eta, prior.scheduler.schedule)
     accs = []
-    for k, fam in enumerate(fams):
+    def family(k: int, fam: str) -> dict:
         prompt = prompt_of(fam, version)
         gen = prior.sample(prompt, samples, guidance, steps, seed + k, scheduler=sched).clouds
         g = subsample(gen, metric_points, seed=2)
         acc = one_nn_accuracy(chamfer_matrix(g, ref), np.full(samples, family_index(fam, version)),
                               ref_lab)
         real = held[held_lab == family_index(fam, version)]
-        res["families"][fam] = {
+        return {
             "prompt": prompt, "accuracy": float(acc.mean()),
             "ceiling": float(ceiling[held_lab == family_index(fam, version)].mean()),
             "one_nna": one_nna(g, real), "spread_ratio": spread(g) / max(spread(real), 1e-12),
             "extent_ratio": float(np.ptp(gen, 1).max(1).mean()),
         }
-        accs.append(acc.mean())
+
+    for k, fam in enumerate(fams):
+        r = res["families"][fam] = parts(f"family/{fam}", lambda k=k, fam=fam: family(k, fam))
+        accs.append(r["accuracy"])
         if log is not None:
-            log(f"{fam:10s} acc {acc.mean():.2f}  ceiling "
-                     f"{res['families'][fam]['ceiling']:.2f}  1-NNA "
-                     f"{res['families'][fam]['one_nna']:.2f}")
+            log(f"{fam:10s} acc {r['accuracy']:.2f}  ceiling {r['ceiling']:.2f}  1-NNA "
+                f"{r['one_nna']:.2f}")
     res["accuracy"] = float(np.mean(accs))
     res["min_accuracy"] = float(np.min(accs))
     res["ceiling"] = float(np.mean([res["families"][f]["ceiling"] for f in fams]))
+    def nearest(prompt: str, n: int, s: int) -> np.ndarray:
+        g = subsample(prior.sample(prompt, n, guidance, steps, s, scheduler=sched).clouds,
+                      metric_points, seed=2)
+        return ref_lab[chamfer_matrix(g, ref).argmin(1).numpy()]
+
     if paraphrases:
         para = {}
         for i, (prompt, ok) in enumerate(PARAPHRASES.items()):
             if not set(ok) <= set(ref_fams):
                 continue
-            g = subsample(prior.sample(prompt, samples, guidance, steps, seed + 100 + i,
-                                       scheduler=sched).clouds,
-                          metric_points, seed=2)
-            nn = ref_lab[chamfer_matrix(g, ref).argmin(1).numpy()]
-            hit = np.isin(nn, [family_index(f, version) for f in ok])
-            para[prompt] = {"families": list(ok), "accuracy": float(hit.mean())}
+            para[prompt] = parts(f"paraphrase/{prompt}", lambda i=i, prompt=prompt, ok=ok: {
+                "families": list(ok), "accuracy": float(np.isin(
+                    nearest(prompt, samples, seed + 100 + i),
+                    [family_index(f, version) for f in ok]).mean())})
             if log is not None:
-                log(f"{prompt!r}: {hit.mean():.2f}")
+                log(f"{prompt!r}: {para[prompt]['accuracy']:.2f}")
         res["paraphrases"] = para
         res["paraphrase_accuracy"] = (float(np.mean([p["accuracy"] for p in para.values()]))
                                       if para else None)
@@ -151,18 +203,17 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
         held_para = {}
         for k, fam in enumerate(fams):
             for j, prompt in enumerate(heldout_prompts(fam, version)):
-                g = subsample(prior.sample(prompt, max(2, samples // 4), guidance, steps,
-                                           seed + 200 + 2 * k + j, scheduler=sched).clouds,
-                              metric_points, seed=2)
-                nn = ref_lab[chamfer_matrix(g, ref).argmin(1).numpy()]
-                held_para[prompt] = {"family": fam, "accuracy": float(
-                    (nn == family_index(fam, version)).mean())}
+                held_para[prompt] = parts(f"heldout/{prompt}", lambda k=k, j=j, fam=fam,
+                                          prompt=prompt: {"family": fam, "accuracy": float((
+                                              nearest(prompt, max(2, samples // 4),
+                                                      seed + 200 + 2 * k + j)
+                                              == family_index(fam, version)).mean())})
         res["heldout_paraphrases"] = held_para
         res["heldout_paraphrase_accuracy"] = float(np.mean(
             [p["accuracy"] for p in held_para.values()]))
     if interpolate:
-        res["interpolations"] = [interpolation(prior, a, b, ref, ref_lab, steps, guidance, seed,
-                                               eta=eta, version=version)
+        res["interpolations"] = [parts(f"interpolation/{a}/{b}", lambda a=a, b=b: interpolation(
+            prior, a, b, ref, ref_lab, steps, guidance, seed, eta=eta, version=version))
                                  for a, b in (INTERPOLATIONS if version == 1 else
                                               INTERPOLATIONS_V2) if {a, b} <= set(ref_fams)]
     res["seconds"] = time.perf_counter() - t0

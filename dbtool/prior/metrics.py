@@ -25,23 +25,29 @@ def subsample(clouds: np.ndarray, n: int, seed: int = 0) -> torch.Tensor:
     return torch.from_numpy(np.take_along_axis(clouds, idx[..., None], 1))
 
 
-def chamfer_matrix(a: torch.Tensor, b: torch.Tensor, budget: int = 2**25) -> torch.Tensor:
+def chamfer_matrix(a: torch.Tensor, b: torch.Tensor, budget: int = 2**20) -> torch.Tensor:
     """Symmetric Chamfer distance (mean squared nearest-neighbour distance, both ways) between
-    every cloud of ``a`` (A, N, 3) and every cloud of ``b`` (B, M, 3): ``(A, B)``. Blocks of
-    cloud pairs are evaluated together, at most ``budget`` point-pair distances at a time."""
+    every cloud of ``a`` (A, N, 3) and every cloud of ``b`` (B, M, 3): ``(A, B)``.
+
+    One cloud of ``a`` meets a block of clouds of ``b`` at a time, at most ``budget``
+    point-pair distances, so the block stays in cache (16 x 128 clouds of 512 points: 0.36 s
+    on one thread of a 2-core AVX2 CPU, against 8.0 s for blocks of 2^25 computed elementwise),
+    as ``|a|^2 + |b|^2 - 2 a.b`` by one batched matrix product; negative rounding is clipped
+    after the minimum (the same value)."""
     n, m = a.shape[1], b.shape[1]
     out = torch.empty(a.shape[0], b.shape[0])
     aa, bb = (a * a).sum(-1), (b * b).sum(-1)
+    bt = b.transpose(1, 2).contiguous()
     cb = max(1, min(b.shape[0], budget // (n * m)))
-    ca = max(1, budget // (n * m * cb))
     with torch.no_grad():
-        for i in range(0, a.shape[0], ca):
-            ai = a[i: i + ca]
+        for i in range(a.shape[0]):
             for j in range(0, b.shape[0], cb):
-                bj = b[j: j + cb]
-                d = (aa[i: i + ca, None, :, None] + bb[None, j: j + cb, None, :]
-                     - 2 * torch.einsum("and,cmd->acnm", ai, bj)).clamp_(min=0)
-                out[i: i + ca, j: j + cb] = d.min(3).values.mean(2) + d.min(2).values.mean(2)
+                btj = bt[j: j + cb]
+                d = torch.baddbmm(bb[j: j + cb, None, :], a[i: i + 1].expand(len(btj), -1, -1),
+                                  btj, alpha=-2)
+                d += aa[i][None, :, None]
+                out[i, j: j + cb] = (d.amin(2).clamp_(min=0).mean(1)
+                                     + d.amin(1).clamp_(min=0).mean(1))
     return out
 
 
