@@ -110,6 +110,20 @@ def test_weights_folders_are_versioned():
         weights_dir(99)
     with pytest.raises(CheckpointError, match="version 99"):
         Prior.load(version=99)
+    assert Prior.load(version=2, with_upsampler=False).corpus == 2
+
+
+def test_a_version_without_upsampler_says_so(tmp_path, monkeypatch):
+    import shutil
+
+    from dbtool.prior import pipeline
+
+    (tmp_path / "v7").mkdir()
+    shutil.copy(pipeline.weights_dir(1) / "base.pt", tmp_path / "v7" / "base.pt")
+    monkeypatch.setattr(pipeline, "WEIGHTS_ROOT", tmp_path)
+    assert Prior.load(version=7, with_upsampler=False).upsampler is None
+    with pytest.raises(CheckpointError, match="prior v7 has no upsampler; load it with"):
+        Prior.load(version=7)
 
 
 def test_a_far_prompt_names_the_nearest_known_captions():

@@ -119,6 +119,9 @@ class Prior:
         model, meta = load_model(base or folder / "base.pt", "base")
         up = None
         if with_upsampler or upsampler is not None:
+            if upsampler is None and not (folder / "upsampler.pt").is_file():
+                raise CheckpointError(f"the shipped prior {folder.name} has no upsampler; load "
+                                      "it with with_upsampler=False or give an upsampler file")
             up, _ = load_model(upsampler or folder / "upsampler.pt", "upsampler")
         prior = cls(model, up, **schedulers)
         prior.corpus = int(meta.get("train_config", meta).get("corpus", 1))
