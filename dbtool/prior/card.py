@@ -26,7 +26,7 @@ cross-attends back to them. Cost is linear in the number of points, the network 
 permutation equivariant (tested), and a model trained on 256-point subsets samples 1,024-point
 clouds. Coordinates enter through Fourier features so thin parts (legs, star arms) stay sharp.
 Attention is written as plain matmuls (faster than torch's fused attention backward on this
-CPU) and training uses bfloat16 autocast{bf16}. The upsampler is
+CPU) and training {precision}. The upsampler is
 the same network whose latents and point decoder also read the 1,024 coarse points as tokens;
 it has no text condition: the coarse cloud carries the shape."""
 
@@ -223,7 +223,10 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None,
         f"{', '.join(repr(c) for c in caps[:6])}.", "",
         _splits(per, len(shapes.FAMILIES), s), ""]
     out += [
-        "## Architecture", "", WHY.format(bf16=_bf16_note(bench)), "",
+        "## Architecture", "", WHY.format(precision=(
+            f"uses bfloat16 autocast{_bf16_note(bench)}" if base_meta["train_config"].get("bf16")
+            else "ran in float32 (bfloat16 autocast pays only on CPUs with native bfloat16 "
+            "units, dbtool/precision.py)")), "",
         "## Training", "",
         "Diffusion as in Point-E: 1,024 steps, cosine schedule (base) and linear (upsampler), "
         "epsilon prediction, clouds scaled x2 into the model, the condition dropped with "
