@@ -162,6 +162,8 @@ def generate(
     upsample: bool = typer.Option(False, "--upsample", help="densify to 4,096 points"),
     base: Path = typer.Option(None, help="base model weights (default: the shipped ones)"),
     upsampler: Path = typer.Option(None, help="upsampler weights (default: the shipped ones)"),
+    version: int = typer.Option(None, "--prior", min=1, help="shipped prior version "
+                                "(default: the default, docs/prior.md)"),
     out: Path = typer.Option(None, "-o", "--out", help="output folder (default "
                                                       "runs/generate-TIME)"),
 ) -> None:
@@ -175,9 +177,10 @@ def generate(
     out = out or default_run_dir("generate")
     with guarded(RuntimeError):
         check_prompts(prompts)
-        for note in filter(None, map(far_prompt_note, prompts)):
+        prior = Prior.load(base, upsampler if upsample else None, with_upsampler=upsample,
+                           version=version)
+        for note in filter(None, (far_prompt_note(p, prior.corpus) for p in prompts)):
             typer.echo(note, err=True)
-        prior = Prior.load(base, upsampler if upsample else None, with_upsampler=upsample)
         summary = run_generate(prior, prompts, settings, out)
     typer.echo(f"{len(prompts) * n} clouds of {summary['points']} points in "
                f"{summary['seconds']:.1f} s -> {out}")

@@ -136,6 +136,20 @@ def test_a_far_prompt_names_the_nearest_known_captions():
     assert note.startswith("note: 'a teapot' is far") and repr(near[0][0]) in note
 
 
+def test_generate_with_another_version_notes_that_versions_captions(tmp_path):
+    """``--prior 2`` samples version 2 (base and upsampler) and a far prompt's note names
+    version 2's captions, not version 1's."""
+    from dbtool.prior.generate import nearest_captions
+
+    near = nearest_captions("a teapot with a long spout", 1, version=2)[0][0]
+    assert near not in {c for c, _ in nearest_captions("a teapot with a long spout", 50)}
+    out = _generate("a teapot with a long spout", "--prior", "2", "-n", "1", "--steps", "4",
+                    "--upsample", "-o", str(tmp_path / "g"))
+    assert out.returncode == 0, out.stderr
+    assert repr(near) in out.stderr
+    assert np.load(tmp_path / "g" / "samples.npz")["fine"].shape == (1, 4096, 3)
+
+
 def test_an_interrupted_evaluation_resumes_to_the_same_numbers(prior, tmp_path):
     """Every finished piece is kept; a resumed evaluation recomputes only the missing ones and
     gives the numbers of an uninterrupted run; another key is refused."""
