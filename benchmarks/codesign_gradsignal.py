@@ -34,10 +34,11 @@ def gradient(prior, clouds: np.ndarray, idx: np.ndarray, guidance: float, seed: 
              draws: int = 64, chunk: int = 16) -> torch.Tensor:
     """d(mean diffusion loss of ``clouds[idx]``)/dc at the null embedding."""
     from dbtool.codesign.embedding import guided_loss
+    from dbtool.codesign.experiments import NULL
     from dbtool.prior.diffusion import SCALE
 
     gen = torch.Generator().manual_seed(seed)
-    c = torch.zeros(1, 384, requires_grad=True)
+    c = NULL.clone().requires_grad_(True)
     x0 = torch.as_tensor(clouds[idx], dtype=torch.float32) * SCALE
     total = 0.0
     for _ in range(draws // chunk):
