@@ -155,7 +155,7 @@ def test_gradients_with_damping_and_a_loss_read_along_the_episode():
     E = rng.uniform(2e4, 4e4, n)
 
     def particles(e=E) -> Particles:
-        return Particles(x0=x0.copy(), phi=np.where(glued > 0, 100.0, 1.0), E=e.copy(),
+        return Particles(x0=x0.copy(), phi=np.ones(n), E=e.copy(),
                          wact=wact.copy(), adir=np.tile([0, 1.0, 0], (n, 1)), glued=glued,
                          v0=np.zeros((n, 3)))
 
@@ -195,3 +195,53 @@ def test_gradients_with_damping_and_a_loss_read_along_the_episode():
               f"rel.err={rel:.2e}")
         assert abs(lp - lm) > 1e-10
         assert rel < TOL
+
+
+def test_gradients_through_a_clamped_gripping_episode():
+    """The gripping scene's clamp (the grid nodes its glued base touches are held at rest) and
+    the fingers' material damping: d loss / d occupancy, stiffness and actions of a loss on
+    every finger and cube particle's final position match central differences, and the clamp
+    and the damping really shape the episode."""
+    task = get_task("gripping")
+    ep = task.episode(reference_robot(task, "finger").compact())
+    p = ep.particles
+    rng = np.random.default_rng(3)
+    n = p.n
+    w = rng.normal(size=(n, 3)) * (p.glued == 0)[:, None]
+    acts = task.controller(STEPS) + 0.2 * rng.standard_normal((STEPS, task.n_groups))
+
+    def loss(phi=p.phi, E=p.E, a=acts, clamp=True, damping=p.damping) -> float:
+        parts = Particles(x0=p.x0, phi=phi, E=E, wact=p.wact, adir=p.adir, glued=p.glued,
+                          v0=p.v0, damping=damping)
+        s = Simulator(ep.scene, parts, task.material, n_steps=STEPS)
+        if not clamp:
+            s.grid.clamp.fill(0)
+        s.forward(a)
+        out = float((s.final_state()["x"] * w).sum())
+        s.release()
+        return out
+
+    sim = Simulator(ep.scene, p, task.material, n_steps=STEPS)
+    sim.forward(acts)
+    base = float((sim.final_state()["x"] * w).sum())
+    grads = sim.backward(w)
+    for label, kw in (("clamp", {"clamp": False}), ("damping", {"damping": None})):
+        change = abs(loss(**kw) - base)
+        print(f"without the {label} the loss changes by {change:.3e}")
+        assert change > 1e-6, f"the {label} does not shape the episode"
+    finger = (p.glued == 0) & ep.robot_mask
+    for name, eps in (("phi", 1e-5), ("E", 1e-1), ("actions", 1e-5)):
+        if name == "actions":
+            d = rng.uniform(-1, 1, acts.shape)
+            lp, lm = loss(a=acts + eps * d), loss(a=acts - eps * d)
+            an = float((grads["actions"][:, : task.n_groups] * d).sum())
+        else:
+            d = rng.uniform(-1, 1, n) * finger * (1e3 if name == "E" else 1.0)
+            v = getattr(p, name)
+            lp, lm = loss(**{name: v + eps * d}), loss(**{name: v - eps * d})
+            an = float((grads[name] * d).sum())
+        fd = (lp - lm) / (2 * eps)
+        rel = abs(fd - an) / max(abs(fd), 1e-12)
+        print(f"clamped gripping d/d{name}: fd={fd:.9e} analytic={an:.9e} rel.err={rel:.2e}")
+        assert abs(lp - lm) > 1e-10
+        assert rel < TOL, f"{name}: fd {fd} vs analytic {an} (rel {rel:.2e})"

@@ -63,10 +63,10 @@ def build(design: Design, cfg: ExportConfig | None = None) -> Assembly:
     cfg = cfg or ExportConfig()
     if cfg.infill not in ("none", "voronoi"):
         raise ValueError(f"unknown infill {cfg.infill!r}: choose none or voronoi")
-    get_task(design.task)  # fail early on an unknown task
+    task = get_task(design.task)  # fail early on an unknown task
     if design.robot.n == 0:
         raise ValueError("the design has no robot fields (points, occupancy, actuators)")
-    if design.task == "gripping":
+    if task.gripper:
         return build_gripper(design, cfg)
     return build_body(design, cfg)
 
@@ -132,7 +132,7 @@ def export_design(design: Design, out_dir: Path, cfg: ExportConfig | None = None
         for part, solid in posed.items():
             if cfg.stl:
                 files.append(write_stl(solid, tmp / f"{part}.stl").name)
-        if cfg.stl and design.task == "gripping":
+        if cfg.stl and get_task(design.task).gripper:
             files.append(write_stl(asm.union, tmp / "assembly.stl").name)
         if cfg.threemf:
             if "body" in posed and len(posed) > 1:  # the regions, which together are the body
@@ -151,7 +151,7 @@ def export_design(design: Design, out_dir: Path, cfg: ExportConfig | None = None
             rep["parts"][k]["material"] = mats[k][0]
             rep["parts"][k]["print_pose"] = p.as_json()
         rep["slicer"] = sliced
-        if design.task == "gripping":
+        if get_task(design.task).gripper:
             _gripper_files(design, asm, cfg, rep, tmp, name)
         write_json(tmp / "report.json", rep)
         (tmp / "report.md").write_text(report_markdown(rep))

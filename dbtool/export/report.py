@@ -10,6 +10,7 @@ import numpy as np
 from dbtool.design import Design
 from dbtool.export._manifold import mesh_arrays, to_trimesh
 from dbtool.export.config import Assembly, ExportConfig
+from dbtool.sim.tasks import get_task
 from dbtool.sim.tasks.base import SPACING
 
 WALL_CAP = 10.0  # mm: walls thicker than this are not measured
@@ -103,9 +104,10 @@ def report(design: Design, asm: Assembly, cfg: ExportConfig, name: str, files: l
     """``report.json``: per part the checks of :func:`mesh_report`, the volume against the
     design's solid volume x scale^3, and the tendons' clearances."""
     parts = {k: mesh_report(v) for k, v in asm.parts.items()}
-    if design.task == "gripping":
+    gripper = get_task(design.task).gripper
+    if gripper:
         parts["assembly"] = mesh_report(asm.union, thickness=False)
-    main = "finger" if design.task == "gripping" else "body"
+    main = "finger" if gripper else "body"
     rep = {
         "design": name, "task": design.task, "units": "mm", "mm_per_sim_unit": cfg.scale_mm,
         "config": asdict(cfg), "files": files, "parts": parts,

@@ -22,11 +22,10 @@ from dbtool.realgap.log import TENDONS, Curve, TipLog
 from dbtool.runs import design_name
 from dbtool.sim.robot import Robot
 from dbtool.sim.simulator import Material, Particles, Simulator
+from dbtool.sim.tasks import get_task
 from dbtool.sim.tasks.base import DX, SPACING
-from dbtool.sim.tasks.gripping import FULL, Gripping
 
 MM_PER_UNIT = 1000.0  # the export's scale: a 60 x 72.5 x 42.5 mm finger
-CLAMP = 1000.0  # mass factor of the clamped root sites (they pin the grid nodes they touch)
 
 
 @dataclass
@@ -107,7 +106,7 @@ def load_gripper(path: str | Path) -> tuple[Design, str]:
     else:
         name = design_name(p)
     design = Design.load(p)
-    if design.task != "gripping":
+    if not get_task(design.task).gripper:
         raise DesignFileError(f"{path} is a {design.task} design, not a gripper: the tendon "
                               "protocol needs a gripping design")
     return design, name
@@ -170,7 +169,7 @@ class Bench:
                  config: BenchConfig | None = None, scale_mm: float = MM_PER_UNIT) -> None:
         self.design, self.cfg, self.scale = design, config or BenchConfig(), scale_mm
         self.groups = groups or {"extension": 0, "flexion": 1}
-        task = Gripping()
+        task = get_task(design.task)
         robot: Robot = design.robot
         ep = task.episode(robot)
         finger = (ep.info["finger"] == 1) & (ep.particles.phi > 0)
@@ -178,9 +177,11 @@ class Bench:
         idx = np.flatnonzero(finger)
         x0 = p.x0[idx]
         top = robot.points[robot.active(), 1].max() + task.origin()[1]
-        clamp = x0[:, 1] >= top - DX - 1e-9  # the root: sites within one grid cell of the top
+        # the root: sites within one grid cell of the top, glued (the simulator's clamp holds
+        # the grid nodes they touch at rest, as the gripping scene's base does)
+        clamp = x0[:, 1] >= top - DX - 1e-9
         self.clamp = clamp
-        self.plane = task.origin()[2] + FULL[2] / 2
+        _, self.plane = task.mirror_plane()
         self.E0 = p.E[idx].astype(float)
         self.material = Material(density=task.material.density / self.cfg.mass_scale)
         self.tips = np.flatnonzero(np.isin(idx, ep.info["tips"].get(1, [])) & ~clamp)
@@ -188,7 +189,7 @@ class Bench:
             raise ValueError("the design's finger is too short for the tendon bench: its tip "
                              "lies within one grid cell of its root")
         self.particles = Particles(
-            x0=x0, phi=np.where(clamp, CLAMP, p.phi[idx]), E=self.E0.copy(),
+            x0=x0, phi=p.phi[idx], E=self.E0.copy(),
             wact=np.where(clamp[:, None], 0.0, p.wact[idx]), adir=p.adir[idx],
             glued=clamp.astype(float), v0=np.zeros_like(x0))
         scene = task.scene()

@@ -40,11 +40,13 @@ from dbtool.robotize.solid import (
     fit_box,
     hangs,
     largest_component,
+    largest_hanging,
     occupancy,
     surface_slope,
     to_unit,
 )
 from dbtool.robotize.stiffness import stiffness as stiffness_map
+from dbtool.sim.bodies import attached
 from dbtool.sim.robot import OCCUPANCY_THRESHOLD, Robot
 from dbtool.sim.tasks import Task
 from dbtool.sim.tasks.base import SPACING
@@ -158,6 +160,10 @@ def indicator(x: torch.Tensor, cfg: RobotizeConfig, noise: float | None = None):
     return chi, unit, w, n, noise_t
 
 
+_DETACHED = ("the reconstructed {task} body does not reach its clamped base: no part of it "
+             "touches the top of the workspace")
+
+
 def robotize(x, task: Task, cfg: RobotizeConfig | None = None, noise: float | None = None,
              method: str = "dpsr", dtype: torch.dtype = torch.float64) -> Robotized:
     """Psi: the robot of cloud ``x`` (prior frame) on ``task``'s design lattice.
@@ -188,7 +194,9 @@ def robotize(x, task: Task, cfg: RobotizeConfig | None = None, noise: float | No
     q_prior = centre + (pts - anchor) / scale  # Placement.to_prior, differentiable in the box
     occ = occupancy(chi, slope, q_prior, SPACING / scale, cfg.softness)
     active = (occ.detach().numpy() >= OCCUPANCY_THRESHOLD).reshape(lattice_dims(task))
-    keep = largest_component(active).ravel()
+    keep = (largest_hanging(active) if hangs(task) else largest_component(active)).ravel()
+    if not keep.any() and active.any():
+        raise RobotizeError(_DETACHED.format(task=task.name))
     drop = torch.as_tensor(active.ravel() & ~keep)
     occ = torch.where(drop, torch.zeros_like(occ), occ)
     return _assemble(task, cfg, xt, occ, keep, place, chi_np, w, n, float(noise.detach()))
@@ -198,6 +206,9 @@ def _assemble(task: Task, cfg: RobotizeConfig, xt: torch.Tensor, occ: torch.Tens
               keep: np.ndarray, place: Placement, chi: np.ndarray, w: torch.Tensor,
               n: torch.Tensor, noise: float) -> Robotized:
     """Steps 4-5 shared by both methods: volume guard, stiffness, actuator groups."""
+    if hangs(task) and not attached(task.design_points(), keep, SPACING,
+                                    task.design_workspace()[1]).any() and keep.any():
+        raise RobotizeError(_DETACHED.format(task=task.name))
     n_keep = int(keep.sum())
     if n_keep < cfg.min_particles:
         raise RobotizeError(f"the reconstructed solid is too small: {n_keep} particles "

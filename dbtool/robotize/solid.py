@@ -15,7 +15,9 @@ Occupancy. A lattice particle at workspace position ``q`` maps back to ``u``; ``
 divided by ``|grad chi|`` averaged over the surface points, which makes it a signed distance
 ``d`` near the surface, and ``occupancy = sigmoid(-d / (softness * h))`` with ``h`` the lattice
 spacing in the prior's frame. Occupancy 0.5 (the simulator's threshold) is exactly the surface.
-Only the largest 26-connected component of active particles is kept.
+Only the largest 26-connected component of active particles is kept; for a body that hangs
+from a clamped base, the largest one that reaches the lattice's top layer (docs/method.md §3,
+"Attachment").
 """
 
 from __future__ import annotations
@@ -48,6 +50,18 @@ def largest_component(mask: np.ndarray) -> np.ndarray:
         return np.zeros_like(mask)
     sizes = np.bincount(labels.ravel())[1:]
     return labels == 1 + int(np.argmax(sizes))
+
+
+def largest_hanging(mask: np.ndarray) -> np.ndarray:
+    """The largest 26-connected component of a boolean ``(x, y, z)`` lattice that reaches its
+    top layer (``y`` last), where a hanging body meets its clamped base; empty if none does."""
+    labels, n = ndimage.label(mask, structure=CONNECTIVITY)
+    hung = np.unique(labels[:, -1, :])
+    hung = hung[hung > 0]
+    if not len(hung):
+        return np.zeros_like(mask)
+    sizes = np.bincount(labels.ravel(), minlength=n + 1)
+    return labels == hung[int(np.argmax(sizes[hung]))]
 
 
 def components(mask: np.ndarray) -> int:
@@ -88,8 +102,9 @@ class Placement:
 
 
 def hangs(task) -> bool:
-    """The gripper finger hangs from its glued base; every other body stands on the ground."""
-    return task.name == "gripping"
+    """Whether ``task``'s body hangs from a clamped base (the gripper finger) instead of
+    standing on the ground: the task's own ``hangs`` trait."""
+    return bool(task.hangs)
 
 
 def fit_box(lo: torch.Tensor, hi: torch.Tensor, workspace, hang: bool = False

@@ -14,6 +14,30 @@ def lattice(workspace: tuple[float, float, float], spacing: float) -> np.ndarray
     return g.reshape(-1, 3)
 
 
+def attached(points: np.ndarray, active: np.ndarray, spacing: float, top: float) -> np.ndarray:
+    """Active lattice particles connected (26-neighbourhood, as the robotizer's components) to
+    the lattice's top layer, the layer under a clamped base at height ``top`` (docs/method.md
+    §3, "Attachment"); ``points`` are cell centres ``spacing`` apart, any subset of a lattice."""
+    from scipy import ndimage
+
+    active = np.asarray(active, bool)
+    out = np.zeros(len(points), bool)
+    if not active.any():
+        return out
+    idx = np.floor(np.asarray(points) / spacing).astype(int)
+    lo = idx.min(0)
+    idx -= lo
+    grid = np.zeros(idx.max(0) + 1, bool)
+    grid[tuple(idx[active].T)] = True
+    labels, _ = ndimage.label(grid, structure=ndimage.generate_binary_structure(3, 3))
+    layer = int(round(top / spacing)) - 1 - lo[1]
+    if not 0 <= layer < grid.shape[1]:
+        return out
+    hung = np.unique(labels[:, layer, :])
+    hung = hung[hung > 0]
+    return active & np.isin(labels[tuple(idx.T)], hung)
+
+
 def shape_occupancy(shape: str, points: np.ndarray, workspace) -> np.ndarray:
     """Occupancy in {0, 1} of a named reference shape; ``u`` is position in [-0.5, 0.5]^3."""
     u = points / np.asarray(workspace) - 0.5

@@ -11,11 +11,15 @@ A substep is ``stress -> p2g -> grid_op -> g2p``:
   ``tau = mu (F F^T - I) + lam J (J - 1) I`` and the muscle term ``-a k F d d^T F^T`` along the
   particle's actuator direction ``d`` (positive ``a`` extends the material along ``d``),
   ``k = act_strength * E``.
-* ``p2g`` / ``g2p``: quadratic B-spline transfers. On the CPU the scatter runs in ``chunks``
+* ``p2g`` / ``g2p``: quadratic B-spline transfers. ``p2g`` scatters the particle's momentum
+  times its damping factor ``damp`` (``exp(-c dt)`` for a material damping rate ``c``; 1 for
+  undamped particles, exactly the undamped arithmetic). On the CPU the scatter runs in ``chunks``
   contiguous particle ranges, one per thread, each into its own copy of the grid with plain
   (non-atomic) adds; ``grid_op`` sums the copies.
 * ``grid_op``: momentum to velocity (times a damping factor, 1 unless the scene sets a
-  damping rate), gravity, ground and box colliders with Coulomb friction, domain walls.
+  damping rate), gravity, ground and box colliders with Coulomb friction, domain walls, and
+  the clamp: a kinematic boundary that holds every node a glued particle's stencil touches
+  at rest (no slip), so what hangs from a glued part is held by the grid it shares with it.
   Works on the active region ``[lo, hi)`` of the grid only.
 
 The arguments come in a fixed order, built by the containers of :mod:`dbtool.sim.state`:
@@ -107,8 +111,9 @@ def actuation(wact: nd(), act: nd(), actp: nd(), t: ti.i32, n: ti.i32):
 @ti.func
 def _p2g_particle(
     x: ti.template(), v: ti.template(), C: ti.template(), F: ti.template(), phi: ti.template(),
-    E: ti.template(), actp: ti.template(), adir: ti.template(), scratch: ti.template(),
-    s, p, c, lo, hi, dx, dt, p_vol, p_rho, nu, act_strength, atomic: ti.template(),
+    E: ti.template(), actp: ti.template(), adir: ti.template(), damp: ti.template(),
+    scratch: ti.template(), s, p, c, lo, hi, dx, dt, p_vol, p_rho, nu, act_strength,
+    atomic: ti.template(),
 ):
     Ap = _stress(C, F, phi, E, actp, adir, s, p, dx, dt, p_vol, p_rho, nu, act_strength)
     m_unit = p_rho * p_vol
@@ -118,7 +123,7 @@ def _p2g_particle(
     fx = xp * inv_dx - ti.cast(base, float)
     w, _dw = _weights(fx)
     m = m_unit * phi[p]
-    mv = m * v[s, p]
+    mv = (m * damp[p]) * v[s, p]
     for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
         off = ti.Vector([i, j, k])
         wt = w[i][0] * w[j][1] * w[k][2]
@@ -133,7 +138,7 @@ def _p2g_particle(
 
 @ti.kernel
 def p2g(
-    x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
+    x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(), damp: nd(),
     scratch: nd(), s: ti.i32, n: ti.i32, chunks: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
     dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
@@ -147,13 +152,13 @@ def p2g(
         c = q // SPREAD
         a, b = _range(c, chunks, n)
         for p in range(a, b):
-            _p2g_particle(x, v, C, F, phi, E, actp, adir, scratch, s, p, c, lo, hi,
+            _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, scratch, s, p, c, lo, hi,
                           dx, dt, p_vol, p_rho, nu, act_strength, False)
 
 
 @ti.kernel
 def p2g_atomic(
-    x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
+    x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(), damp: nd(),
     scratch: nd(), s: ti.i32, n: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
     dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
@@ -161,7 +166,7 @@ def p2g_atomic(
     """Massively parallel variant of :func:`p2g` (GPU): one grid copy, atomic adds."""
     lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
     for p in range(n):
-        _p2g_particle(x, v, C, F, phi, E, actp, adir, scratch, s, p, 0, lo, hi,
+        _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, scratch, s, p, 0, lo, hi,
                       dx, dt, p_vol, p_rho, nu, act_strength, True)
 
 
@@ -224,13 +229,14 @@ def _colliders(pos, v, boxes: ti.template(), ground_y, mu_f):
 
 @ti.kernel
 def grid_op(
-    scratch: nd(), grid_m: nd(), grid_vin: nd(), grid_v: nd(), boxes: nd(),
+    scratch: nd(), grid_m: nd(), grid_vin: nd(), grid_v: nd(), boxes: nd(), clamp: nd(),
     s: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
     dx: float, dt: float, gravity: float, ground_y: float, mu_f: float, damp: float,
 ):
     """Sum the p2g copies (and clear them), then velocity update and boundary conditions;
-    ``damp`` scales the velocity each substep (mass-proportional damping; 1 = none)."""
+    ``damp`` scales the velocity each substep (mass-proportional damping; 1 = none);
+    ``clamp`` is 1 at the clamped nodes (their velocity is zero) and 0 elsewhere."""
     for i, j, k in ti.ndrange((lx, hx), (ly, hy), (lz, hz)):
         acc = ti.Vector([0.0, 0.0, 0.0, 0.0])
         for c in range(chunks):
@@ -244,7 +250,7 @@ def grid_op(
             vin[1] -= dt * gravity
             I = ti.Vector([i, j, k])
             _v0, _v1, _v2, v3 = _colliders(I * dx, vin, boxes, ground_y, mu_f)
-            vout = v3 * _wall_mask(I, v3, ti.Vector([nx, ny, nz]))
+            vout = v3 * _wall_mask(I, v3, ti.Vector([nx, ny, nz])) * (1.0 - clamp[i, j, k])
         grid_m[s, i, j, k] = m
         grid_vin[s, i, j, k] = vin
         grid_v[s, i, j, k] = vout

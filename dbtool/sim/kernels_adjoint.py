@@ -61,7 +61,8 @@ def _stress_vjp(Cp, Fp, e, a, d, ph, G, gFn, dx, dt, p_vol, p_rho, nu, act_stren
 
 @ti.kernel
 def p2g_grad(
-    x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(), ggrid: nd(),
+    x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(), damp: nd(),
+    ggrid: nd(),
     xg: nd(), vg: nd(), Cg: nd(), Fg: nd(), phig: nd(), Eg: nd(), actpg: nd(),
     s: ti.i32, n: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
@@ -84,7 +85,7 @@ def p2g_grad(
         a = actp[p]
         d = adir[p]
         m = m_unit * ph
-        vp = v[s, p]
+        vp = damp[p] * v[s, p]  # the scattered velocity (momentum / m)
         Cp = C[s, p]
         Fp = F[s, p]
         Fn = (ti.Matrix.identity(float, 3) + dt * Cp) @ Fp
@@ -116,7 +117,7 @@ def p2g_grad(
             sgo += wg.outer_product(ti.cast(off, float))
             gm += wt * gvv
         xg[s, p] = xg[s, p] + inv_dx * sc - Ap.transpose() @ sg
-        vg[s, p] = m * sg
+        vg[s, p] = (m * damp[p]) * sg
         G = dx * (sgo - sg.outer_product(fx))  # d L / d A
         g_C, g_F, g_ph, g_e, g_a = _stress_vjp(Cp, Fp, e, a, d, ph, G, Fg[s + 1, p], dx, dt,
                                                p_vol, p_rho, nu, act_strength)
@@ -147,7 +148,7 @@ def _friction_vjp(v, nrm, mu_f, g):
 
 @ti.kernel
 def grid_op_grad(
-    gscratch: nd(), grid_m: nd(), grid_vin: nd(), ggrid: nd(), boxes: nd(),
+    gscratch: nd(), grid_m: nd(), grid_vin: nd(), ggrid: nd(), boxes: nd(), clamp: nd(),
     s: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
     dx: float, dt: float, gravity: float, ground_y: float, mu_f: float, damp: float,
@@ -165,7 +166,7 @@ def grid_op_grad(
             I = ti.Vector([i, j, k])
             pos = I * dx
             v0, v1, v2, v3 = _colliders(pos, vin, boxes, ground_y, mu_f)
-            g = g * _wall_mask(I, v3, ti.Vector([nx, ny, nz]))
+            g = g * _wall_mask(I, v3, ti.Vector([nx, ny, nz])) * (1.0 - clamp[i, j, k])
             g = _friction_vjp(v2, _box_normal(pos, boxes, 1), mu_f, g)
             g = _friction_vjp(v1, _box_normal(pos, boxes, 0), mu_f, g)
             if pos[1] <= ground_y:

@@ -74,6 +74,7 @@ class Particles:
     adir: np.ndarray
     glued: np.ndarray
     v0: np.ndarray
+    damping: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -85,13 +86,41 @@ class Particles:
             raise ValueError("the body is empty: no particles to simulate")
         shapes = {
             "x0": (n, 3), "phi": (n,), "E": (n,), "wact": (n, K.MAX_GROUPS),
-            "adir": (n, 3), "glued": (n,), "v0": (n, 3),
+            "adir": (n, 3), "glued": (n,), "v0": (n, 3), "damping": (n,),
         }
         for name, shape in shapes.items():
+            if getattr(self, name) is None:
+                continue
             arr = np.asarray(getattr(self, name))
             if arr.shape != shape:
                 raise ValueError(f"particle field {name} has shape {arr.shape}, expected {shape}")
             if not np.all(np.isfinite(arr)):
                 raise ValueError(f"particle field {name} contains NaN or inf")
+        if self.damping is not None and np.any(np.asarray(self.damping) < 0):
+            raise ValueError("particle field damping must be >= 0")
         if not np.any(self.phi > 0):
             raise ValueError("the body is empty: every particle is inactive (occupancy 0)")
+
+
+def clamp_nodes(x0: np.ndarray, glued: np.ndarray, dx: float,
+                dims: tuple[int, int, int]) -> np.ndarray:
+    """The clamp of docs/method.md §3: 1 at every grid node that the quadratic B-spline
+    stencil of a glued particle weighs (weight > 0), 0 elsewhere. Glued particles never move,
+    so the clamp is fixed for the episode; ``grid_op`` holds these nodes at rest."""
+    out = np.zeros(dims, np.float64)
+    x = np.asarray(x0, float)[np.asarray(glued) > 0]
+    if not len(x):
+        return out
+    g = x / dx
+    base = np.floor(g - 0.5).astype(int)
+    fx = g - base
+    for off in np.ndindex(3, 3, 3):
+        o = np.array(off)
+        # per-axis weights 0.5 (1.5 - f)^2, 0.75 - (f - 1)^2, 0.5 (f - 0.5)^2 (kernels._weights)
+        w = np.where(o == 0, 0.5 * (1.5 - fx) ** 2,
+                     np.where(o == 1, 0.75 - (fx - 1.0) ** 2, 0.5 * (fx - 0.5) ** 2))
+        sel = np.all(w > 1e-12, axis=1)
+        idx = base[sel] + o
+        ok = np.all((idx >= 0) & (idx < np.array(dims)), axis=1)
+        out[tuple(idx[ok].T)] = 1.0
+    return out

@@ -17,7 +17,7 @@ import numpy as np
 from dbtool.sim import kernels as K
 from dbtool.sim import runtime
 from dbtool.sim.backward import backward
-from dbtool.sim.model import SUBSTEPS, Material, Particles, Scene
+from dbtool.sim.model import SUBSTEPS, Material, Particles, Scene, clamp_nodes
 from dbtool.sim.state import Adjoint, ArrayPool, Body, Grid, State
 from dbtool.sim.stepper import Region, SimulationError, Stepper
 
@@ -87,6 +87,11 @@ class Simulator:
         norm = np.linalg.norm(p.adir, axis=1, keepdims=True)
         b.adir.from_numpy((p.adir / np.maximum(norm, 1e-12)).astype(f))
         b.glued.from_numpy(np.asarray(p.glued, f))
+        rate = np.zeros(self.n) if p.damping is None else np.asarray(p.damping, float)
+        b.damp.from_numpy(np.exp(-rate * self.mat.dt).astype(f))
+        if np.any(np.asarray(p.glued) > 0):
+            self.grid.clamp.from_numpy(
+                clamp_nodes(p.x0, p.glued, self.scene.dx, self.scene.grid).astype(f))
 
     def set_particle_fields(self, phi=None, E=None, wact=None) -> None:
         """Replace occupancy, stiffness or actuator weights without re-allocating."""

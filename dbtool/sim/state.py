@@ -82,8 +82,9 @@ class State:
 @dataclass
 class Body:
     """Per-particle fields (``wact``: weight of each of ``MAX_GROUPS`` control channels,
-    ``adir``: unit muscle direction, ``glued``: 1 for clamped particles), the per-control-step
-    actuation ``act`` and the muscle signal ``actp`` of the current control step."""
+    ``adir``: unit muscle direction, ``glued``: 1 for clamped particles, ``damp``: momentum
+    factor per substep of the material damping), the per-control-step actuation ``act`` and
+    the muscle signal ``actp`` of the current control step."""
 
     phi: object
     E: object
@@ -92,29 +93,34 @@ class Body:
     glued: object
     act: object
     actp: object
+    damp: object
 
     @classmethod
     def allocate(cls, pool: ArrayPool, dtype, n: int, n_steps: int, grad: bool) -> Body:
         v3, _, _ = _types(dtype)
         return cls(pool(dtype, (n,), grad), pool(dtype, (n,), grad),
                    pool(dtype, (n, K.MAX_GROUPS), grad), pool(v3, (n,)), pool(dtype, (n,)),
-                   pool(dtype, (n_steps, K.MAX_GROUPS), grad), pool(dtype, (n,), grad))
+                   pool(dtype, (n_steps, K.MAX_GROUPS), grad), pool(dtype, (n,), grad),
+                   pool(dtype, (n,)))
 
     @property
     def stress(self) -> tuple:
         """The fields the stress and p2g kernels read, in their order."""
-        return self.phi, self.E, self.actp, self.adir
+        return self.phi, self.E, self.actp, self.adir, self.damp
 
 
 @dataclass
 class Grid:
     """``scratch``: one p2g grid copy per chunk (mass-weighted momentum and mass); ``m``,
-    ``vin`` (before the boundary conditions) and ``v`` of each substep of a control step."""
+    ``vin`` (before the boundary conditions) and ``v`` of each substep of a control step;
+    ``clamp``: 1 at the nodes held at rest by glued particles (:func:`~dbtool.sim.model.
+    clamp_nodes`)."""
 
     scratch: object
     m: object
     vin: object
     v: object
+    clamp: object
 
     @classmethod
     def allocate(cls, pool: ArrayPool, dtype, dims: tuple[int, ...], chunks: int,
@@ -123,7 +129,9 @@ class Grid:
         scratch = pool(v4, (chunks, *dims))
         scratch.fill(0)
         shape = (substeps, *dims)
-        return cls(scratch, pool(dtype, shape), pool(v3, shape), pool(v3, shape))
+        clamp = pool(dtype, dims)
+        clamp.fill(0)
+        return cls(scratch, pool(dtype, shape), pool(v3, shape), pool(v3, shape), clamp)
 
 
 @dataclass

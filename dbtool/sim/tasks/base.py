@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from dbtool.sim.bodies import lattice
+from dbtool.sim.bodies import attached, lattice
 from dbtool.sim.kernels import BOUND, MAX_GROUPS
 from dbtool.sim.robot import Robot
 from dbtool.sim.simulator import SUBSTEPS, Material, Particles, Scene  # noqa: F401 (re-exported)
@@ -18,6 +18,10 @@ GROUND = BOUND * DX  # the ground plane sits on top of the bottom wall
 OBJECT_STIFFNESS = 1e5  # the cube / box is a stiff elastic body
 GRAVITY = (0.0, -1.0, 0.0)
 N_STEPS = 100  # every task: 100 control steps of SUBSTEPS (the simulator's) substeps
+
+
+class DetachedError(ValueError):
+    """A body that should hang from a clamped base has no material attached to it."""
 
 
 @dataclass
@@ -50,6 +54,23 @@ class Task:
     direction: tuple[float, float, float] = (0.0, 1.0, 0.0)
     initial_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     material = Material()
+    # The designed body hangs from a clamped base (docs/method.md §3): it is placed against
+    # the top of its workspace, only material attached to the top layer is scored, and
+    # exports and the tendon bench mount it by that top face. Otherwise it stands on the ground.
+    hangs = False
+    object_stiffness = OBJECT_STIFFNESS  # Young's modulus of the task's cubes
+    damping = 0.0  # material damping rate of the robot's particles (1/time; docs/method.md §3)
+
+    def mirror_plane(self) -> tuple[int, float] | None:
+        """``(axis, value)``: the scene holds the design and its mirror copy about the world
+        plane ``x[axis] = value`` (the gripper's two fingers); ``None`` for a single body."""
+        return None
+
+    @property
+    def gripper(self) -> bool:
+        """A pair of mirrored bodies hanging from a clamped base: exported as a gripper
+        (fingers, base, tendons) and measured on the tendon bench."""
+        return self.hangs and self.mirror_plane() is not None
 
     # ------------------------------------------------------------------ hooks
     def scene(self) -> Scene:
@@ -95,7 +116,7 @@ class Task:
             raise ValueError(f"task {self.name} needs {self.n_groups} actuator groups, "
                              f"the robot has {robot.actuators.shape[1]}")
         xr, idx = self.place(robot)
-        phi = robot.presence()[idx]
+        phi = (robot.presence() * self.attachment(robot))[idx]
         wact = np.zeros((len(idx), MAX_GROUPS))
         wact[:, : self.n_groups] = robot.actuators[idx]
         adir = robot.particle_directions()[idx] if self.n_groups else np.tile(
@@ -110,7 +131,7 @@ class Task:
         for centre, side in self.objects():
             xo = lattice((side, side, side), SPACING) + np.asarray(centre) - side / 2
             m = len(xo)
-            parts.append((xo, np.ones(m), np.full(m, OBJECT_STIFFNESS), np.zeros((m, MAX_GROUPS)),
+            parts.append((xo, np.ones(m), np.full(m, self.object_stiffness), np.zeros((m, MAX_GROUPS)),
                           np.tile((0.0, 1.0, 0.0), (m, 1)), np.zeros(m), np.full(m, -1)))
         x0 = np.concatenate([p[0] for p in parts])
         v0 = np.zeros_like(x0)
@@ -120,6 +141,8 @@ class Task:
             E=np.concatenate([p[2] for p in parts]), wact=np.concatenate([p[3] for p in parts]),
             adir=np.concatenate([p[4] for p in parts]),
             glued=np.concatenate([p[5] for p in parts]), v0=v0,
+            damping=np.where(np.arange(len(x0)) < n_robot, self.damping, 0.0) if self.damping
+            else None,
         )
         design_index = np.concatenate([p[6] for p in parts]).astype(int)
         robot_mask = np.zeros(len(x0), bool)
@@ -127,6 +150,19 @@ class Task:
         ep = Episode(self, self.scene(), particles, design_index, robot_mask, ~robot_mask)
         self.finish_episode(ep)
         return ep
+
+    def attachment(self, robot: Robot) -> np.ndarray:
+        """1 for the design particles that are scored: all of them, or for a body that hangs
+        from a clamped base only those attached to it through the lattice (the rest is
+        dropped, docs/method.md §3 "Attachment"); :class:`DetachedError` when none is."""
+        if not self.hangs:
+            return np.ones(robot.n)
+        keep = attached(robot.points, robot.active(), SPACING, self.design_workspace()[1])
+        if not keep.any():
+            raise DetachedError(
+                f"the {self.name} design does not reach its clamped base: no material in the "
+                "top layer of its workspace is connected to the body, so it would fall")
+        return keep.astype(float)
 
     def extra_particles(self, robot: Robot):
         """Non-designed robot parts (the gripper's glued base)."""

@@ -17,7 +17,15 @@ from dbtool.sim.bodies import lattice
 from dbtool.sim.kernels import MAX_GROUPS
 from dbtool.sim.robot import DEFAULT_STIFFNESS, Robot
 from dbtool.sim.simulator import Scene
-from dbtool.sim.tasks.base import DX, GROUND, SPACING, Episode, Task, centroid, ramp
+from dbtool.sim.tasks.base import (
+    DX,
+    GROUND,
+    SPACING,
+    Episode,
+    Task,
+    centroid,
+    ramp,
+)
 
 CUBE = 0.03
 BASE = 3 * SPACING  # thickness of the glued base plate
@@ -38,6 +46,19 @@ class Gripping(Task):
     workspace = FULL
     n_groups = 2
     cluster_axes = (2,)
+    hangs = True
+    damping = 5.0  # material damping of the fingers: ratio ~0.1 at their first bending mode
+
+    def mirror_plane(self) -> tuple[int, float]:
+        return 2, float(self.origin()[2] + FULL[2] / 2)
+
+    contact = ("shared grid (MLS-MPM single velocity field): no slip while finger and cube "
+               "press together, free separation; no friction coefficient to tune")
+
+    def describe(self) -> dict:
+        return {**super().describe(), "cube_stiffness": self.object_stiffness,
+                "finger_cube_contact": self.contact, "finger_damping": self.damping,
+                "ground_friction": self.scene().friction}
 
     def design_workspace(self) -> tuple[float, float, float]:
         return (FULL[0], FULL[1] - BASE, FULL[2] / 2 - CUBE / 2 - SPACING)
@@ -59,10 +80,10 @@ class Gripping(Task):
         return float(c[2])  # outer strip (farther from the mirror plane) first
 
     def place(self, robot: Robot):
-        o = self.origin()
-        left = robot.points + o
+        axis, plane = self.mirror_plane()
+        left = robot.points + self.origin()
         right = left.copy()
-        right[:, 2] = 2 * (o[2] + FULL[2] / 2) - right[:, 2]
+        right[:, axis] = 2 * plane - right[:, axis]
         return np.concatenate([left, right]), np.concatenate([np.arange(robot.n)] * 2)
 
     def extra_particles(self, robot: Robot):
@@ -79,9 +100,9 @@ class Gripping(Task):
         inside = np.all(np.abs(x - centre) < side / 2 + SPACING, axis=1) & ep.robot_mask
         ep.particles.phi = np.where(inside, 0.0, ep.particles.phi)
         ep.design_index = np.where(inside, -1, ep.design_index)
-        plane = self.origin()[2] + FULL[2] / 2
+        axis, plane = self.mirror_plane()
         fingers = ep.robot_mask & (ep.particles.glued == 0)
-        finger = np.where(fingers, np.where(x[:, 2] < plane, 1, 2), 0)  # 1 designed, 2 mirror
+        finger = np.where(fingers, np.where(x[:, axis] < plane, 1, 2), 0)  # 1 designed, 2 mirror
         active = ep.particles.phi > 0
         tips = {}
         for f in (1, 2):

@@ -1,0 +1,147 @@
+"""The gripping scene as a person would check it by eye (docs/method.md §3, "Gripping"): the
+fingers hang from the clamped base and stay there, the prescribed controller closes them on the
+cube, a block finger lifts it, and material that does not reach the base is not scored."""
+
+import functools
+
+import numpy as np
+import pytest
+
+from dbtool.robotize import robotize
+from dbtool.robotize.actuators import reference_robot
+from dbtool.sim.bodies import attached
+from dbtool.sim.rollout import simulate
+from dbtool.sim.tasks import TASKS, get_task
+from dbtool.sim.tasks.base import SPACING, DetachedError
+
+MM = 1000.0  # the export's scale: mm per simulation unit
+HOLD_STEPS = 300
+ROOT_MM = 3.0  # the root: a finger's particles within 3 mm of its top, next to the base
+
+
+@functools.cache
+def _prior_bodies() -> dict:
+    """Two robotized prior samples (seeded), as co-design would score them."""
+    from dbtool.prior.pipeline import Prior
+
+    task = get_task("gripping")
+    prior = Prior.load()
+    out = {}
+    for prompt in ("a finger", "a cylinder"):
+        cloud = prior.sample(prompt, n=1, seed=0).clouds[0]
+        out[f"prior: {prompt}"] = robotize(cloud, task).robot.compact()
+    return out
+
+
+def _body(name: str):
+    task = get_task("gripping")
+    if name.startswith("prior"):
+        return _prior_bodies()[name]
+    return reference_robot(task, name).compact()
+
+
+def _root(ep) -> np.ndarray:
+    """The designed finger's root particles."""
+    f = (ep.info["finger"] == 1) & (ep.particles.phi > 0)
+    y = ep.particles.x0[:, 1]
+    return f & (y >= y[f].max() - ROOT_MM / MM)
+
+
+@pytest.mark.parametrize("name", ["finger", "box", "prior: a finger", "prior: a cylinder"])
+def test_a_finger_at_rest_is_held_by_the_clamped_base(name):
+    """Zero actuation for 300 control steps: the root moves < 0.1 mm (export scale) and the
+    finger's kinetic energy dies away (it sags elastically and stops; before the clamp the
+    root of the shipped design sank 20 mm in 100 steps)."""
+    task = get_task("gripping")
+    ro = simulate(task, _body(name), np.zeros((HOLD_STEPS, task.n_groups)), n_steps=HOLD_STEPS)
+    ep, P = ro.episode, ro.positions
+    phi = ep.particles.phi
+    root = _root(ep)
+    w = phi[root] / phi[root].sum()
+    c = (P[:, root] * w[None, :, None]).sum(1)
+    moved = np.linalg.norm(c - c[0], axis=1) * MM
+    finger = (ep.info["finger"] == 1) & (phi > 0)
+    ke = ((np.diff(P[:, finger], axis=0) ** 2).sum(2) * phi[finger]).sum(1)
+    print(f"{name}: root moved {moved.max():.4f} mm at most, {moved[-1]:.4f} mm at the end; "
+          f"finger KE peak {ke[:100].max():.2e}, last 50 steps max {ke[-50:].max():.2e}")
+    assert moved.max() < 0.1, f"{name}: the root moved {moved.max():.3f} mm"
+    assert ke[-50:].max() < 0.1 * ke[:100].max(), "the finger keeps moving"
+    assert ke[-25:].mean() < ke[-50:-25].mean() * 1.5 + 1e-12
+
+
+@functools.cache
+def _block_rollout():
+    task = get_task("gripping")
+    return simulate(task, reference_robot(task, "box").compact())
+
+
+def test_the_prescribed_controller_closes_the_fingers_on_the_cube():
+    """During the first ramp the tips approach each other and the fingers stay on the cube's
+    sides (the tip distance shrinks while the cube rises)."""
+    task = get_task("gripping")
+    ro = _block_rollout()
+    d = task.tip_distance(ro.episode, ro.positions)
+    print("tip distance every 10 steps:", np.round(d[::10], 4))
+    assert d[:50].min() < d[0] - 3e-3, f"tip distance {d[0]:.4f} -> {d[:50].min():.4f}"
+    assert np.all(np.diff(d[:25]) <= 1e-5), "the tips do not close during the ramp"
+
+
+def test_a_block_finger_lifts_the_cube():
+    ro = _block_rollout()
+    ep = ro.episode
+    cube = ro.positions[:, ep.object_mask, 1].mean(1)
+    print(f"block finger: metric {ro.metric:.5f}, cube centre lift per 10 steps "
+          f"{np.round((cube[::10] - cube[0]) * MM, 2)} mm")
+    assert ro.metric > 0.002
+
+
+def test_the_task_declares_its_traits():
+    """Hanging from a clamped base and the mirror plane are the task's, not its name's."""
+    grip = get_task("gripping")
+    assert grip.hangs and grip.gripper
+    axis, value = grip.mirror_plane()
+    assert axis == 2 and value == pytest.approx(grip.origin()[2] + grip.workspace[2] / 2)
+    for name in TASKS:
+        if name != "gripping":
+            t = get_task(name)
+            assert not t.hangs and t.mirror_plane() is None and not t.gripper
+    d = grip.describe()
+    assert d["cube_stiffness"] > 0 and "no slip" in d["finger_cube_contact"]
+
+
+def _cut(robot, below: float, above: float):
+    """A copy of ``robot`` with the slab ``below <= y < above`` removed."""
+    r = type(robot)(robot.points, robot.occupancy.copy(), robot.stiffness, robot.actuators,
+                    robot.directions)
+    y = robot.points[:, 1]
+    r.occupancy[(y >= below) & (y < above)] = 0.0
+    return r
+
+
+def test_material_that_does_not_reach_the_base_is_dropped():
+    task = get_task("gripping")
+    robot = reference_robot(task, "box")
+    top = task.design_workspace()[1]
+    cut = _cut(robot, 0.03, 0.03 + 2 * SPACING)  # a gap through the whole finger
+    keep = attached(cut.points, cut.active(), SPACING, top)
+    assert keep.any() and not keep[cut.points[:, 1] < 0.03].any()
+    ep = task.episode(cut)
+    lower = (ep.info["finger"] > 0) & (ep.particles.x0[:, 1] < task.origin()[1] + 0.03)
+    assert lower.any() and np.all(ep.particles.phi[lower] == 0)
+    # a body that never reaches the base: one clear error, not a silent zero
+    with pytest.raises(DetachedError, match="does not reach its clamped base"):
+        task.episode(_cut(robot, top - 2 * SPACING, top))
+
+
+def test_the_robotizer_keeps_the_component_that_reaches_the_base():
+    """The robotizer keeps the largest component that reaches the base; a cloud of two blobs,
+    the larger one low and apart, keeps the upper one."""
+    task = get_task("gripping")
+    rng = np.random.default_rng(0)
+    up = rng.normal(size=(400, 3)) * 0.05 + [0.0, 0.35, 0.0]
+    low = rng.normal(size=(624, 3)) * 0.08 + [0.0, -0.25, 0.0]
+    r = robotize(np.concatenate([up, low]), task)
+    keep = r.robot.active()
+    top = task.design_workspace()[1]
+    assert keep.any()
+    assert attached(r.robot.points, keep, SPACING, top).sum() == keep.sum()
