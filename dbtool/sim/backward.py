@@ -27,7 +27,8 @@ def _substep_adjoint(sp: Stepper, adj: Adjoint, s: int, r: Region) -> None:
     else:
         KA.g2p_grad(st.x, g.v, b.glued, adj.x, adj.v, adj.C, adj.scratch, s, n, sp.chunks, *r,
                     sc.dx, m.dt)
-    KA.grid_op_grad(adj.scratch, g.m, g.vin, adj.grid, sp.boxes, g.clamp, s, sp.chunks, *sp.dims, *r,
+    KA.grid_op_grad(adj.scratch, g.m, g.vin, adj.grid, sp.boxes, g.clamp, s, sp.chunks,
+                    *sp.dims, *r,
                     sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction, sc.damp(m.dt))
     KA.p2g_grad(*st, *b.stress, adj.grid, *adj.p2g, s, n, *r, *sp.consts)
 

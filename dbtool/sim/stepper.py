@@ -99,7 +99,8 @@ class Stepper:
             K.p2g_atomic(*st, *self.body.stress, g.scratch, s, self.n, *r, *self.consts)
         else:
             K.p2g(*st, *self.body.stress, g.scratch, s, self.n, self.chunks, *r, *self.consts)
-        K.grid_op(g.scratch, g.m, g.vin, g.v, self.boxes, g.clamp, s, self.chunks, *self.dims, *r, sc.dx,
+        K.grid_op(g.scratch, g.m, g.vin, g.v, self.boxes, g.clamp, s, self.chunks, *self.dims,
+                  *r, sc.dx,
                   m.dt, sc.gravity, sc.ground_y, sc.friction, sc.damp(m.dt))
         if not last:
             K.g2p(st.x, st.v, st.C, g.v, self.body.glued, s, self.n, *r, sc.dx, m.dt)

@@ -131,8 +131,9 @@ class Task:
         for centre, side in self.objects():
             xo = lattice((side, side, side), SPACING) + np.asarray(centre) - side / 2
             m = len(xo)
-            parts.append((xo, np.ones(m), np.full(m, self.object_stiffness), np.zeros((m, MAX_GROUPS)),
-                          np.tile((0.0, 1.0, 0.0), (m, 1)), np.zeros(m), np.full(m, -1)))
+            parts.append((xo, np.ones(m), np.full(m, self.object_stiffness),
+                          np.zeros((m, MAX_GROUPS)), np.tile((0.0, 1.0, 0.0), (m, 1)),
+                          np.zeros(m), np.full(m, -1)))
         x0 = np.concatenate([p[0] for p in parts])
         v0 = np.zeros_like(x0)
         v0[:n_robot] = self.initial_velocity
