@@ -60,7 +60,9 @@ def test_flexion_closes_monotonically_and_release_returns(standard):
     print("flexion", np.round(fl.tip, 3), "\nextension", np.round(standard.curves["extension"].tip,
                                                                      3))
     assert np.all(np.diff(pull) < 0), "pulling the flexion tendon must close the fingers"
-    assert pull[0] - pull[-1] > 2.0  # measured 3.6 mm over 10 mm of tendon
+    # measured 2.04 mm over 10 mm of tendon with the simulator's clamp (3.6 mm with the
+    # heavy-mass root it replaced, which let the nodes under the root sites move)
+    assert pull[0] - pull[-1] > 1.5
     assert np.all(np.diff(rel) > 0)
     assert abs(rel[-1] - pull[0]) < RETURN_TOL_MM
     _, ext = standard.curves["extension"].branch("pull")
