@@ -48,7 +48,7 @@ def robotize_cloud_file(cloud: str | Path, task_name: str, out: str | Path,
     meta = {"source": str(cloud), "method": method, "noise": rz.noise,
             "config": asdict(cfg), "placement": {"centre": rz.placement.centre.tolist(),
                                                  "anchor": rz.placement.anchor.tolist(),
-                                                 "scale": rz.placement.scale}}
+                                                 "scale": rz.placement.scale.tolist()}}
     design = Design(task.name, robot, task.controller(), x, {}, meta)
     path = design.save(out)
     counts = robot.actuators[robot.active()].sum(0).astype(int).tolist()

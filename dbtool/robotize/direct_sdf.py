@@ -44,7 +44,7 @@ def direct_occupancy(x: torch.Tensor, task: Task, cfg):
     n, _ = N.pca_normals(xl, cfg.k)
     n, _ = N.orient(n, to_unit(xl), np.ones(len(xl)), cfg.orient_res)
     lo, hi = xl.detach().min(0).values.numpy(), xl.detach().max(0).values.numpy()
-    place = Placement.for_task(lo, hi, task)
+    place = Placement.for_task(lo, hi, task, cfg.stretch)
     pts = task.design_points()
     ws = np.asarray(task.design_workspace())
     dims = np.round(ws / SPACING).astype(int)
@@ -57,7 +57,7 @@ def direct_occupancy(x: torch.Tensor, task: Task, cfg):
     hit[tuple(cells.T)] = True
     hard = torch.as_tensor(hit.ravel(), dtype=x.dtype)
     q = torch.as_tensor(place.to_prior(pts), dtype=x.dtype)
-    soft = torch.sigmoid(-signed_distance(q, xl, n) / (cfg.softness * SPACING / place.scale))
+    soft = torch.sigmoid(-signed_distance(q, xl, n) / (cfg.softness * SPACING / place.scale.min()))
     occ = hard + soft - soft.detach()
     w = torch.zeros(len(x), dtype=x.dtype)
     w[live] = 1.0

@@ -66,7 +66,8 @@ class RobotizeConfig:
     """Settings of Psi. ``res``/``sigma``: DPSR grid and smoothing (cells); ``k``: PCA
     neighbours; ``orient_res``: coarse grid of the orientation field; ``robust_iters``:
     reweighting passes (0 = plain DPSR); ``softness``: occupancy ramp in lattice spacings;
-    ``stiffness``: ``constant`` or ``depth``."""
+    ``stiffness``: ``constant`` or ``depth``; ``stretch``: a hanging body's height is stretched
+    to its workspace's (:func:`~dbtool.robotize.solid.fit_box`; off = uniform scale)."""
 
     res: int = 128
     sigma: float = 1.5
@@ -80,6 +81,7 @@ class RobotizeConfig:
     softness: float = 0.5
     stiffness: str = "constant"
     min_particles: int = MIN_PARTICLES
+    stretch: bool = True
 
     def __post_init__(self) -> None:
         from dbtool.robotize.stiffness import MODES
@@ -187,12 +189,13 @@ def robotize(x, task: Task, cfg: RobotizeConfig | None = None, noise: float | No
     lo, hi, cells = box_faces(chi, box_nodes(chi_np))
     if cells == 0:
         raise RobotizeError("the reconstructed solid is empty (no inside found)")
-    centre, anchor, scale = fit_box(lo, hi, task.design_workspace(), hang=hangs(task))
-    place = Placement(centre.detach().numpy(), anchor.detach().numpy(), float(scale.detach()))
+    centre, anchor, scale = fit_box(lo, hi, task.design_workspace(), hang=hangs(task),
+                                   stretch=cfg.stretch)
+    place = Placement(centre.detach().numpy(), anchor.detach().numpy(), scale.detach().numpy())
     pts = torch.as_tensor(task.design_points(), dtype=dtype)
     slope = surface_slope(chi, unit, w)
     q_prior = centre + (pts - anchor) / scale  # Placement.to_prior, differentiable in the box
-    occ = occupancy(chi, slope, q_prior, SPACING / scale, cfg.softness)
+    occ = occupancy(chi, slope, q_prior, SPACING / scale.min(), cfg.softness)
     active = (occ.detach().numpy() >= OCCUPANCY_THRESHOLD).reshape(lattice_dims(task))
     keep = (largest_hanging(active) if hangs(task) else largest_component(active)).ravel()
     if not keep.any() and active.any():

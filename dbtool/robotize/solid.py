@@ -71,12 +71,13 @@ def components(mask: np.ndarray) -> int:
 
 @dataclass(frozen=True)
 class Placement:
-    """Similarity map between the prior's frame and a task's workspace coordinates:
-    ``q = anchor + scale * (x - centre)``."""
+    """Map between the prior's frame and a task's workspace coordinates:
+    ``q = anchor + scale * (x - centre)``, ``scale`` per axis (equal on every axis but for a
+    hanging body's height, :func:`fit_box`)."""
 
     centre: np.ndarray
     anchor: np.ndarray
-    scale: float
+    scale: np.ndarray
 
     def to_workspace(self, x: np.ndarray) -> np.ndarray:
         return self.anchor + self.scale * (np.asarray(x) - self.centre)
@@ -85,20 +86,21 @@ class Placement:
         return self.centre + (np.asarray(q) - self.anchor) / self.scale
 
     @classmethod
-    def fit(cls, lo: np.ndarray, hi: np.ndarray, workspace, hang: bool = False) -> Placement:
+    def fit(cls, lo: np.ndarray, hi: np.ndarray, workspace, hang: bool = False,
+            stretch: bool = True) -> Placement:
         """Fit the box ``[lo, hi]`` (prior frame) into ``workspace``: uniform scale, centred
         in x and z, on the floor (or hanging from the top, inner face at ``+z``, when
         ``hang``)."""
         centre, anchor, scale = fit_box(torch.as_tensor(lo, dtype=torch.float64),
                                         torch.as_tensor(hi, dtype=torch.float64), workspace,
-                                        hang)
-        return cls(centre.numpy(), anchor.numpy(), float(scale))
+                                        hang, stretch)
+        return cls(centre.numpy(), anchor.numpy(), scale.numpy())
 
     @classmethod
-    def for_task(cls, lo: np.ndarray, hi: np.ndarray, task) -> Placement:
+    def for_task(cls, lo: np.ndarray, hi: np.ndarray, task, stretch: bool = True) -> Placement:
         """:meth:`fit` into ``task``'s design workspace; the gripper finger hangs from its
         glued base, every other body stands on the ground."""
-        return cls.fit(lo, hi, task.design_workspace(), hang=hangs(task))
+        return cls.fit(lo, hi, task.design_workspace(), hang=hangs(task), stretch=stretch)
 
 
 def hangs(task) -> bool:
@@ -107,16 +109,22 @@ def hangs(task) -> bool:
     return bool(task.hangs)
 
 
-def fit_box(lo: torch.Tensor, hi: torch.Tensor, workspace, hang: bool = False
-            ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """``(centre, anchor, scale)`` of :meth:`Placement.fit`, differentiable in the box.
+def fit_box(lo: torch.Tensor, hi: torch.Tensor, workspace, hang: bool = False,
+            stretch: bool = True) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``(centre, anchor, scale)`` of :meth:`Placement.fit`, differentiable in the box;
+    ``scale`` per axis.
 
-    A standing body is centred in x and z on the floor. A hanging gripper finger (``hang``)
-    has its top at the base and its inner face (``+z``, toward the mirror plane) at the
-    workspace's inner boundary, next to the cube: centred, a slender finger would hang
-    0.01-0.02 away from the cube and never touch it (docs/robotize.md)."""
+    A standing body is centred in x and z on the floor, scaled uniformly (aspect kept). A
+    hanging gripper finger (``hang``) has its top at the base and its inner face (``+z``,
+    toward the mirror plane) at the workspace's inner boundary, next to the cube: centred, a
+    slender finger would hang 0.01-0.02 away from the cube and never touch it. Its cross-section
+    (x, z) keeps the uniform scale, and its height is stretched to the workspace's, so every
+    finger reaches down to the cube: scaled uniformly, a body wider than tall ended above the
+    cube, touched nothing and scored zero with a zero gradient (docs/robotize.md)."""
     ws = torch.as_tensor(np.asarray(workspace, float), dtype=lo.dtype)
-    scale = (ws / (hi - lo).clamp_min(1e-9)).min()
+    ext = (hi - lo).clamp_min(1e-9)
+    s = (ws / ext).min()
+    scale = torch.stack([s, ws[1] / ext[1] if hang and stretch else s, s])
     centre, anchor = (lo + hi) / 2, ws / 2
     if hang:
         centre = torch.stack([centre[0], hi[1], hi[2]])
