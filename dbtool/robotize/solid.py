@@ -29,6 +29,7 @@ import torch
 from scipy import ndimage
 
 from dbtool.robotize.dpsr import sample
+from dbtool.sim.bodies import CLAMP_LAYERS
 
 SPAN = 1.5  # the DPSR unit cube covers [-0.75, 0.75]^3 of the prior's frame
 DOMAIN = 0.675  # |x| beyond this (prior frame) is an outlier: weight 0
@@ -54,9 +55,10 @@ def largest_component(mask: np.ndarray) -> np.ndarray:
 
 def largest_hanging(mask: np.ndarray) -> np.ndarray:
     """The largest 26-connected component of a boolean ``(x, y, z)`` lattice that reaches its
-    top layer (``y`` last), where a hanging body meets its clamped base; empty if none does."""
+    top ``CLAMP_LAYERS`` layers (``y`` last), which a hanging body's clamped base holds; empty
+    if none does."""
     labels, n = ndimage.label(mask, structure=CONNECTIVITY)
-    hung = np.unique(labels[:, -1, :])
+    hung = np.unique(labels[:, -CLAMP_LAYERS:, :])
     hung = hung[hung > 0]
     if not len(hung):
         return np.zeros_like(mask)

@@ -14,10 +14,14 @@ def lattice(workspace: tuple[float, float, float], spacing: float) -> np.ndarray
     return g.reshape(-1, 3)
 
 
+CLAMP_LAYERS = 2  # lattice layers under a clamped base that its clamp holds (one grid cell)
+
+
 def attached(points: np.ndarray, active: np.ndarray, spacing: float, top: float) -> np.ndarray:
     """Active lattice particles connected (26-neighbourhood, as the robotizer's components) to
-    the lattice's top layer, the layer under a clamped base at height ``top`` (docs/method.md
-    §3, "Attachment"); ``points`` are cell centres ``spacing`` apart, any subset of a lattice."""
+    the ``CLAMP_LAYERS`` top layers of the lattice, those under a clamped base at height
+    ``top`` whose grid nodes the clamp holds (docs/method.md §3, "Attachment"); ``points``
+    are cell centres ``spacing`` apart, any subset of a lattice."""
     from scipy import ndimage
 
     active = np.asarray(active, bool)
@@ -30,10 +34,10 @@ def attached(points: np.ndarray, active: np.ndarray, spacing: float, top: float)
     grid = np.zeros(idx.max(0) + 1, bool)
     grid[tuple(idx[active].T)] = True
     labels, _ = ndimage.label(grid, structure=ndimage.generate_binary_structure(3, 3))
-    layer = int(round(top / spacing)) - 1 - lo[1]
-    if not 0 <= layer < grid.shape[1]:
+    layer = int(round(top / spacing)) - lo[1]  # one past the top layer
+    if layer <= 0:
         return out
-    hung = np.unique(labels[:, layer, :])
+    hung = np.unique(labels[:, max(0, layer - CLAMP_LAYERS):layer, :])
     hung = hung[hung > 0]
     return active & np.isin(labels[tuple(idx.T)], hung)
 

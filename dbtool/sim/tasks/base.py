@@ -55,7 +55,7 @@ class Task:
     initial_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     material = Material()
     # The designed body hangs from a clamped base (docs/method.md §3): it is placed against
-    # the top of its workspace, only material attached to the top layer is scored, and
+    # the top of its workspace, only material attached to its clamp is scored, and
     # exports and the tendon bench mount it by that top face. Otherwise it stands on the ground.
     hangs = False
     object_stiffness = OBJECT_STIFFNESS  # Young's modulus of the task's cubes
@@ -162,7 +162,7 @@ class Task:
         if not keep.any():
             raise DetachedError(
                 f"the {self.name} design does not reach its clamped base: no material in the "
-                "top layer of its workspace is connected to the body, so it would fall")
+                "layers its clamp holds is connected to the body, so it would fall")
         return keep.astype(float)
 
     def extra_particles(self, robot: Robot):
