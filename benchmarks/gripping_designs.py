@@ -1,0 +1,124 @@
+"""Does each designed gripper hold, touch and lift? (docs/results.md, "Gripping").
+
+For every ``dbtool design gripping`` run folder given: its ``design.npz`` at rest with zero
+actuation for 300 control steps (the root, the finger's particles within 3 mm of its top: how
+far its centroid moves, mm at the export's scale), then with its own controller for 100
+steps (the metric, the cube's lift, and whether finger and cube ever come within one particle
+spacing). Beside them: the block finger under the prescribed controller, and the best prior
+sample each run scored from the null embedding (its embedding epoch 0, the same prior at that
+run's first 12 draws) and over all its embedding epochs. Prints a table and writes
+``benchmarks/results/gripping-designs.json``.
+
+Usage::
+
+    python benchmarks/gripping_designs.py ~/.cache/dbtool/grip35/seed*
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _results import write_result  # noqa: E402
+
+RESULTS = Path(__file__).parent / "results"
+MM = 1000.0
+
+
+def held(task, robot, steps: int = 300) -> float:
+    """Largest displacement (mm) of the designed finger's root centroid at rest."""
+    from dbtool.sim.rollout import simulate
+
+    ro = simulate(task, robot, np.zeros((steps, task.n_groups)), n_steps=steps)
+    ep, P = ro.episode, ro.positions
+    phi = ep.particles.phi
+    f = (ep.info["finger"] == 1) & (phi > 0)
+    y = ep.particles.x0[:, 1]
+    root = f & (y >= y[f].max() - 3.0 / MM)
+    w = phi[root] / phi[root].sum()
+    c = (P[:, root] * w[None, :, None]).sum(1)
+    return float(np.linalg.norm(c - c[0], axis=1).max() * MM)
+
+
+def grip(task, robot, actions=None) -> dict:
+    """Metric, cube lift (mm) and closest finger-cube approach (mm) with ``actions``."""
+    from dbtool.sim.rollout import simulate
+    from dbtool.sim.tasks.base import SPACING
+
+    ro = simulate(task, robot, actions)
+    ep, P = ro.episode, ro.positions
+    fingers = (ep.info["finger"] > 0) & (ep.particles.phi > 0)
+    cube = ep.object_mask
+    lo, hi = P[:, cube].min(1), P[:, cube].max(1)  # the cube's box per step
+    gap = np.maximum(np.maximum(lo[:, None] - P[:, fingers], P[:, fingers] - hi[:, None]), 0)
+    closest = float(np.linalg.norm(gap, axis=2).min() * MM)
+    lift = P[:, cube, 1].mean(1)
+    return {"metric": float(ro.metric), "lift_mm": float((lift[-1] - lift[0]) * MM),
+            "closest_mm": closest, "touches": closest <= SPACING * MM}
+
+
+def run_prior_best(run: Path) -> tuple[float, float]:
+    """Best epoch-0 (null-embedding) sample and best embedding-epoch sample of a run."""
+    rows = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
+    emb = [r for r in rows if r.get("phase") == "embedding"]
+    m0 = np.nanmax(np.array(emb[0]["metrics"], float))
+    allm = np.nanmax(np.concatenate([np.array(r["metrics"], float) for r in emb]))
+    return float(m0), float(allm)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("runs", nargs="+", type=Path)
+    ap.add_argument("--out", type=Path)
+    a = ap.parse_args()
+    from dbtool.design import Design
+    from dbtool.robotize.actuators import reference_robot
+    from dbtool.sim.tasks import get_task
+
+    task = get_task("gripping")
+    block = reference_robot(task, "box").compact()
+    rows = [{"design": "block finger (prescribed controller)", **grip(task, block),
+             "root_mm": held(task, block)}]
+    print(rows[0], flush=True)
+    for run in sorted(a.runs):
+        if not (run / "design.npz").is_file():
+            continue
+        d = Design.load(run / "design.npz")
+        robot = d.robot.compact()
+        m0, mall = run_prior_best(run)
+        r = {"design": run.name, **grip(task, robot, d.controller), "root_mm": held(task, robot),
+             "prior_epoch0_best": m0, "embedding_best": mall}
+        rows.append(r)
+        print(r, flush=True)
+    des = [r for r in rows[1:]]
+    summary = {}
+    if des:
+        m = np.array([r["metric"] for r in des])
+        p0 = np.array([r["prior_epoch0_best"] for r in des])
+        diff = m - p0
+        summary = {
+            "seeds": len(des), "metric_mean": float(m.mean()), "metric_sd": float(m.std(ddof=1))
+            if len(m) > 1 else 0.0, "block_metric": rows[0]["metric"],
+            "all_attached": all(r["root_mm"] < 0.1 for r in des),
+            "all_touch": all(r["touches"] for r in des),
+            "all_lift": all(r["lift_mm"] > 0 for r in des),
+            "beats_block": int((m > rows[0]["metric"]).sum()),
+            "paired_vs_prior_epoch0": {
+                "mean": float(diff.mean()),
+                "sd": float(diff.std(ddof=1)) if len(diff) > 1 else 0.0,
+                "z": float(diff.mean() / (diff.std(ddof=1) / np.sqrt(len(diff))))
+                if len(diff) > 1 and diff.std(ddof=1) > 0 else None,
+                "higher": int((diff > 0).sum())},
+        }
+    print(summary)
+    write_result({"rows": rows, "summary": summary}, a.out, RESULTS / "gripping-designs.json",
+                 False, {"runs": [str(r) for r in a.runs]})
+
+
+if __name__ == "__main__":
+    main()
