@@ -62,8 +62,11 @@ def grip(task, robot, actions=None) -> dict:
             "closest_mm": closest, "touches": closest <= SPACING * MM}
 
 
-def run_prior_best(run: Path) -> tuple[float, float]:
-    """Best epoch-0 (null-embedding) sample and best embedding-epoch sample of a run."""
+def run_prior_best(run: Path) -> tuple[float | None, float | None]:
+    """Best epoch-0 (null-embedding) sample and best embedding-epoch sample of a run (None for
+    a folder without a run's metrics, e.g. an export)."""
+    if not (run / "metrics.jsonl").is_file():
+        return None, None
     rows = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
     emb = [r for r in rows if r.get("phase") == "embedding"]
     m0 = np.nanmax(np.array(emb[0]["metrics"], float))
@@ -91,11 +94,12 @@ def main() -> None:
         d = Design.load(run / "design.npz")
         robot = d.robot.compact()
         m0, mall = run_prior_best(run)
-        r = {"design": run.name, **grip(task, robot, d.controller), "root_mm": held(task, robot),
+        name = run.name if m0 is not None else str(run)
+        r = {"design": name, **grip(task, robot, d.controller), "root_mm": held(task, robot),
              "prior_epoch0_best": m0, "embedding_best": mall}
         rows.append(r)
         print(r, flush=True)
-    des = [r for r in rows[1:]]
+    des = [r for r in rows[1:] if r["prior_epoch0_best"] is not None]
     summary = {}
     if des:
         m = np.array([r["metric"] for r in des])
