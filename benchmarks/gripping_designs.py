@@ -30,6 +30,15 @@ RESULTS = Path(__file__).parent / "results"
 MM = 1000.0
 
 
+def root_sites(task, robot) -> int:
+    """Active design particles in the lattice layers the clamp holds (its root's size)."""
+    from dbtool.sim.bodies import CLAMP_LAYERS
+    from dbtool.sim.tasks.base import SPACING
+
+    y = robot.points[robot.active(), 1]
+    return int((y > task.design_workspace()[1] - CLAMP_LAYERS * SPACING).sum())
+
+
 def held(task, robot, steps: int = 300) -> float:
     """Largest displacement (mm) of the designed finger's root centroid at rest."""
     from dbtool.sim.rollout import simulate
@@ -86,7 +95,7 @@ def main() -> None:
     task = get_task("gripping")
     block = reference_robot(task, "box").compact()
     rows = [{"design": "block finger (prescribed controller)", **grip(task, block),
-             "root_mm": held(task, block)}]
+             "root_mm": held(task, block), "root_sites": root_sites(task, block)}]
     print(rows[0], flush=True)
     for run in sorted(a.runs):
         if not (run / "design.npz").is_file():
@@ -96,7 +105,7 @@ def main() -> None:
         m0, mall = run_prior_best(run)
         name = run.name if m0 is not None else str(run)
         r = {"design": name, **grip(task, robot, d.controller), "root_mm": held(task, robot),
-             "prior_epoch0_best": m0, "embedding_best": mall}
+             "root_sites": root_sites(task, robot), "prior_epoch0_best": m0, "embedding_best": mall}
         rows.append(r)
         print(r, flush=True)
     des = [r for r in rows[1:] if r["prior_epoch0_best"] is not None]
