@@ -46,9 +46,7 @@ def held(task, robot, steps: int = 300) -> float:
     ro = simulate(task, robot, np.zeros((steps, task.n_groups)), n_steps=steps)
     ep, P = ro.episode, ro.positions
     phi = ep.particles.phi
-    f = (ep.info["finger"] == 1) & (phi > 0)
-    y = ep.particles.x0[:, 1]
-    root = f & (y >= y[f].max() - 3.0 / MM)
+    root = task.root(ep, 3.0 / MM)
     w = phi[root] / phi[root].sum()
     c = (P[:, root] * w[None, :, None]).sum(1)
     return float(np.linalg.norm(c - c[0], axis=1).max() * MM)

@@ -40,13 +40,6 @@ def _body(name: str):
     return reference_robot(task, name).compact()
 
 
-def _root(ep) -> np.ndarray:
-    """The designed finger's root particles."""
-    f = (ep.info["finger"] == 1) & (ep.particles.phi > 0)
-    y = ep.particles.x0[:, 1]
-    return f & (y >= y[f].max() - ROOT_MM / MM)
-
-
 @pytest.mark.parametrize("name", ["finger", "box", "prior: a finger", "prior: a cylinder"])
 def test_a_finger_at_rest_is_held_by_the_clamped_base(name):
     """Zero actuation for 300 control steps: the root moves < 0.1 mm (export scale) and the
@@ -56,7 +49,7 @@ def test_a_finger_at_rest_is_held_by_the_clamped_base(name):
     ro = simulate(task, _body(name), np.zeros((HOLD_STEPS, task.n_groups)), n_steps=HOLD_STEPS)
     ep, P = ro.episode, ro.positions
     phi = ep.particles.phi
-    root = _root(ep)
+    root = task.root(ep, ROOT_MM / MM)
     w = phi[root] / phi[root].sum()
     c = (P[:, root] * w[None, :, None]).sum(1)
     moved = np.linalg.norm(c - c[0], axis=1) * MM

@@ -123,6 +123,7 @@ def export_design(design: Design, out_dir: Path, cfg: ExportConfig | None = None
     out_dir = Path(out_dir)
     name = name or out_dir.name
     asm = build(design, cfg)
+    gripper = get_task(design.task).gripper
     mats = materials(asm.parts)
     pose = poses(asm, cfg)
     posed = {k: apply_pose(v, pose[k]) for k, v in asm.parts.items()}
@@ -132,7 +133,7 @@ def export_design(design: Design, out_dir: Path, cfg: ExportConfig | None = None
         for part, solid in posed.items():
             if cfg.stl:
                 files.append(write_stl(solid, tmp / f"{part}.stl").name)
-        if cfg.stl and get_task(design.task).gripper:
+        if cfg.stl and gripper:
             files.append(write_stl(asm.union, tmp / "assembly.stl").name)
         if cfg.threemf:
             if "body" in posed and len(posed) > 1:  # the regions, which together are the body
@@ -151,7 +152,7 @@ def export_design(design: Design, out_dir: Path, cfg: ExportConfig | None = None
             rep["parts"][k]["material"] = mats[k][0]
             rep["parts"][k]["print_pose"] = p.as_json()
         rep["slicer"] = sliced
-        if get_task(design.task).gripper:
+        if gripper:
             _gripper_files(design, asm, cfg, rep, tmp, name)
         write_json(tmp / "report.json", rep)
         (tmp / "report.md").write_text(report_markdown(rep))

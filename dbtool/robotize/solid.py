@@ -16,7 +16,7 @@ divided by ``|grad chi|`` averaged over the surface points, which makes it a sig
 ``d`` near the surface, and ``occupancy = sigmoid(-d / (softness * h))`` with ``h`` the lattice
 spacing in the prior's frame. Occupancy 0.5 (the simulator's threshold) is exactly the surface.
 Only the largest 26-connected component of active particles is kept; for a body that hangs
-from a clamped base, the largest one that reaches the lattice's top layer (docs/method.md §3,
+from a clamped base, the largest one that reaches the layers its clamp holds (docs/method.md §3,
 "Attachment").
 """
 

@@ -123,6 +123,14 @@ class Gripping(Task):
         return centroid(x[m], phi[m])[1] - centroid(x0[m], phi[m])[1]
 
     @staticmethod
+    def root(ep: Episode, depth: float = 0.003) -> np.ndarray:
+        """Mask of the designed finger's root: its active particles within ``depth`` of its
+        top, next to the clamped base (3 mm at the export's scale by default)."""
+        f = (ep.info["finger"] == 1) & (ep.particles.phi > 0)
+        y = ep.particles.x0[:, 1]
+        return f & (y >= y[f].max() - depth)
+
+    @staticmethod
     def tip_distance(ep: Episode, positions: np.ndarray) -> np.ndarray:
         """Distance between the two fingertips (lowest 15 % of each finger) over time."""
         tips = ep.info["tips"]
