@@ -8,7 +8,8 @@
 3. the robust step: noise-aware deflation, planarity-blended normals, widened smoothing and
    IRLS point weights (:mod:`dbtool.robotize.robust`) around DPSR (:mod:`dbtool.robotize.dpsr`);
 4. placement into the task's design workspace and smooth occupancy on its particle lattice,
-   largest connected component, minimum-volume guard (:mod:`dbtool.robotize.solid`);
+   a hanging body's root mount, largest connected component, minimum-volume guard
+   (:mod:`dbtool.robotize.solid`);
 5. stiffness (:mod:`dbtool.robotize.stiffness`) and actuator groups by k-means of the centred
    local coordinates along the task's axes, ordered by the task's documented key
    (:func:`dbtool.robotize.actuators.cluster_actuators`).
@@ -41,6 +42,7 @@ from dbtool.robotize.solid import (
     hangs,
     largest_component,
     largest_hanging,
+    mount,
     occupancy,
     surface_slope,
     to_unit,
@@ -67,7 +69,9 @@ class RobotizeConfig:
     neighbours; ``orient_res``: coarse grid of the orientation field; ``robust_iters``:
     reweighting passes (0 = plain DPSR); ``softness``: occupancy ramp in lattice spacings;
     ``stiffness``: ``constant`` or ``depth``; ``stretch``: a hanging body's height is stretched
-    to its workspace's (:func:`~dbtool.robotize.solid.fit_box`; off = uniform scale)."""
+    to its workspace's (:func:`~dbtool.robotize.solid.fit_box`; off = uniform scale);
+    ``mount``: depth (workspace units) of a hanging body's root mount under its base
+    (:func:`~dbtool.robotize.solid.mount`; 0 = off)."""
 
     res: int = 128
     sigma: float = 1.5
@@ -82,13 +86,15 @@ class RobotizeConfig:
     stiffness: str = "constant"
     min_particles: int = MIN_PARTICLES
     stretch: bool = True
+    mount: float = 0.025
 
     def __post_init__(self) -> None:
         from dbtool.robotize.stiffness import MODES
 
-        if self.res < 16 or self.sigma <= 0 or self.k < 4 or self.orient_res < 8:
+        if (self.res < 16 or self.sigma <= 0 or self.k < 4 or self.orient_res < 8
+                or self.mount < 0):
             raise RobotizeError("robotizer settings out of range: res >= 16, sigma > 0, k >= 4, "
-                                "orient_res >= 8")
+                                "orient_res >= 8, mount >= 0")
         if self.stiffness not in MODES:
             raise RobotizeError(f"unknown stiffness mapping {self.stiffness!r}; choose one of "
                                 f"{', '.join(MODES)}")
@@ -182,6 +188,7 @@ def robotize(x, task: Task, cfg: RobotizeConfig | None = None, noise: float | No
     xt = torch.tensor(check_cloud(x), dtype=dtype, requires_grad=True)
     if method == "direct_sdf":
         occ, place, w, n = direct_occupancy(xt, task, cfg)
+        occ = root_mount(occ, task, cfg)
         active = occ.detach().numpy() >= OCCUPANCY_THRESHOLD
         return _assemble(task, cfg, xt, occ, active, place, np.zeros(0), w, n, 0.0)
     chi, unit, w, n, noise = indicator(xt, cfg, noise)
@@ -195,7 +202,8 @@ def robotize(x, task: Task, cfg: RobotizeConfig | None = None, noise: float | No
     pts = torch.as_tensor(task.design_points(), dtype=dtype)
     slope = surface_slope(chi, unit, w)
     q_prior = centre + (pts - anchor) / scale  # Placement.to_prior, differentiable in the box
-    occ = occupancy(chi, slope, q_prior, SPACING / scale.min(), cfg.softness)
+    occ = root_mount(occupancy(chi, slope, q_prior, SPACING / scale.min(), cfg.softness),
+                     task, cfg)
     active = (occ.detach().numpy() >= OCCUPANCY_THRESHOLD).reshape(lattice_dims(task))
     keep = (largest_hanging(active) if hangs(task) else largest_component(active)).ravel()
     if not keep.any() and active.any():
@@ -203,6 +211,13 @@ def robotize(x, task: Task, cfg: RobotizeConfig | None = None, noise: float | No
     drop = torch.as_tensor(active.ravel() & ~keep)
     occ = torch.where(drop, torch.zeros_like(occ), occ)
     return _assemble(task, cfg, xt, occ, keep, place, chi_np, w, n, float(noise.detach()))
+
+
+def root_mount(occ: torch.Tensor, task: Task, cfg: RobotizeConfig) -> torch.Tensor:
+    """``occ`` with a hanging body's root mount (:func:`~dbtool.robotize.solid.mount`)."""
+    if not hangs(task):
+        return occ
+    return mount(occ, lattice_dims(task), int(round(cfg.mount / SPACING)))
 
 
 def _assemble(task: Task, cfg: RobotizeConfig, xt: torch.Tensor, occ: torch.Tensor,

@@ -66,6 +66,23 @@ def largest_hanging(mask: np.ndarray) -> np.ndarray:
     return labels == hung[int(np.argmax(sizes[hung]))]
 
 
+def mount(occ: torch.Tensor, dims: tuple[int, int, int], layers: int) -> torch.Tensor:
+    """The root mount of a body hanging from a clamped base (docs/method.md §2, "Root mount"):
+    in the top ``layers`` layers of the ``(x, y, z)`` lattice (``y`` last), each site's
+    occupancy becomes the largest of its own and of the sites under it within those layers, so
+    the finger's upper part continues straight up to the base with the union of its
+    cross-sections there. A finger hanging from the base by a neck of a few sites swung about
+    it and flung the cube (the clamp holds the grid, not a neck's bending); a printed finger is
+    bonded to its base plate over its whole shoulder. ``occ`` is flat, as the lattice's
+    particles; a running maximum, so its gradient reaches the site that sets each value."""
+    if layers <= 0:
+        return occ
+    g = occ.reshape(dims)
+    k = min(layers, dims[1])
+    top = torch.cummax(g[:, dims[1] - k:, :], dim=1).values
+    return torch.cat([g[:, :dims[1] - k, :], top], 1).reshape(-1)
+
+
 def components(mask: np.ndarray) -> int:
     """Number of 26-connected components of a boolean grid."""
     return int(ndimage.label(mask, structure=CONNECTIVITY)[1])
