@@ -40,13 +40,11 @@ def _body(name: str):
     return reference_robot(task, name).compact()
 
 
-@pytest.mark.parametrize("name", ["finger", "box", "prior: a finger", "prior: a cylinder"])
-def test_a_finger_at_rest_is_held_by_the_clamped_base(name):
-    """Zero actuation for 300 control steps: the root moves < 0.1 mm (export scale) and the
-    finger's kinetic energy dies away (it sags elastically and stops; before the clamp the
-    root of the shipped design sank 20 mm in 100 steps)."""
+def _at_rest(robot) -> tuple[np.ndarray, np.ndarray]:
+    """Zero actuation for ``HOLD_STEPS`` control steps: how far the root's centroid has moved
+    (mm, export scale) and the designed finger's kinetic energy, per step."""
     task = get_task("gripping")
-    ro = simulate(task, _body(name), np.zeros((HOLD_STEPS, task.n_groups)), n_steps=HOLD_STEPS)
+    ro = simulate(task, robot, np.zeros((HOLD_STEPS, task.n_groups)), n_steps=HOLD_STEPS)
     ep, P = ro.episode, ro.positions
     phi = ep.particles.phi
     root = task.root(ep, ROOT_MM / MM)
@@ -55,11 +53,75 @@ def test_a_finger_at_rest_is_held_by_the_clamped_base(name):
     moved = np.linalg.norm(c - c[0], axis=1) * MM
     finger = (ep.info["finger"] == 1) & (phi > 0)
     ke = ((np.diff(P[:, finger], axis=0) ** 2).sum(2) * phi[finger]).sum(1)
+    return moved, ke
+
+
+@pytest.mark.parametrize("name", ["finger", "box", "prior: a finger", "prior: a cylinder"])
+def test_a_finger_at_rest_is_held_by_the_clamped_base(name):
+    """Zero actuation for 300 control steps: the root moves < 0.1 mm (export scale) and the
+    finger's kinetic energy dies away (it sags elastically and stops; before the clamp the
+    root of the shipped design sank 20 mm in 100 steps)."""
+    moved, ke = _at_rest(_body(name))
     print(f"{name}: root moved {moved.max():.4f} mm at most, {moved[-1]:.4f} mm at the end; "
           f"finger KE peak {ke[:100].max():.2e}, last 50 steps max {ke[-50:].max():.2e}")
     assert moved.max() < 0.1, f"{name}: the root moved {moved.max():.3f} mm"
     assert ke[-50:].max() < 0.1 * ke[:100].max(), "the finger keeps moving"
     assert ke[-25:].mean() < ke[-50:-25].mean() * 1.5 + 1e-12
+
+
+def _necked():
+    """A block finger that hangs from the base by a 2x2-site neck through its top 4 layers
+    (the neck the co-designed fingers had before the root mount), and the same body after
+    the robotizer's root mount."""
+    import torch
+
+    from dbtool.robotize.robotizer import RobotizeConfig, lattice_dims
+    from dbtool.robotize.solid import mount
+
+    task = get_task("gripping")
+    robot = reference_robot(task, "box")
+    ws = task.design_workspace()
+    p = robot.points
+    neck = (np.abs(p[:, 0] - ws[0] / 2) < SPACING) & (np.abs(p[:, 2] - ws[2] + 3 * SPACING)
+                                                     < SPACING)
+    necked = _cut(robot, ws[1] - 4 * SPACING, ws[1])
+    necked.occupancy[neck] = robot.occupancy[neck]
+    layers = int(round(RobotizeConfig().mount / SPACING))
+    occ = mount(torch.as_tensor(necked.occupancy), lattice_dims(task), layers).numpy()
+    mounted = type(robot)(p, occ, robot.stiffness, robot.actuators, robot.directions)
+    return necked, mounted
+
+
+def test_the_root_mount_continues_the_finger_up_to_the_base():
+    """Within the mount's depth each lattice column is filled up from its lowest occupied
+    site, so the neck's section becomes the block's; below it nothing changes; the running
+    maximum passes gradients (finite differences)."""
+    import torch
+
+    from dbtool.robotize.solid import mount
+
+    necked, mounted = _necked()
+    top = get_task("gripping").design_workspace()[1]
+    y = necked.points[:, 1]
+    root = y > top - 2 * SPACING  # the two layers the clamp holds
+    assert necked.active()[root].sum() == 2 * 4
+    assert np.array_equal(mounted.active()[y > top - SPACING], mounted.active()[y < SPACING])
+    assert np.array_equal(mounted.occupancy[y < top - 4 * SPACING],
+                          necked.occupancy[y < top - 4 * SPACING])
+    g = torch.rand(4 * 6 * 3, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda o: mount(o, (4, 6, 3), 4), (g,))
+    assert torch.equal(mount(g, (4, 6, 3), 0), g)
+
+
+def test_a_necked_finger_swings_and_the_mounted_one_is_held():
+    """The neck, not the clamp, let the co-designed fingers swing: at rest the necked block's
+    root moves more than 0.1 mm; mounted, it is held like the block."""
+    necked, mounted = _necked()
+    swing, _ = _at_rest(necked.compact())
+    held, ke = _at_rest(mounted.compact())
+    print(f"necked: root moved {swing.max():.3f} mm; mounted: {held.max():.4f} mm")
+    assert swing.max() > 0.1 and held.max() < 0.1
+    assert ke[-50:].max() < 0.1 * ke[:100].max()
 
 
 @functools.cache
