@@ -3,15 +3,17 @@
 For every ``dbtool design gripping`` run folder given: its ``design.npz`` at rest with zero
 actuation for 300 control steps (the root, the finger's particles within 3 mm of its top: how
 far its centroid moves, mm at the export's scale), then with its own controller for 100
-steps (the metric, the cube's lift, and whether finger and cube ever come within one particle
-spacing). Beside them: the block finger under the prescribed controller, and the best prior
-sample each run scored from the null embedding (its embedding epoch 0, the same prior at that
-run's first 12 draws) and over all its embedding epochs. Prints a table and writes
+steps (the metric, the cube's lift, the closest finger-cube approach, and whether they come
+within one grid cell: the range at which MLS-MPM's shared grid couples two bodies, so the
+cube is lifted across gaps of up to about 3 mm at the export's scale). Beside them: the block
+finger under the prescribed controller, and the best prior sample each run scored from the
+null embedding (its embedding epoch 0, the same prior at that run's first 12 draws) and over
+all its embedding epochs. Prints a table and writes
 ``benchmarks/results/gripping-designs.json``.
 
 Usage::
 
-    python benchmarks/gripping_designs.py ~/.cache/dbtool/grip35/seed*
+    python benchmarks/gripping_designs.py ~/.cache/dbtool/grip35m/seed*
 """
 
 from __future__ import annotations
@@ -55,7 +57,7 @@ def held(task, robot, steps: int = 300) -> float:
 def grip(task, robot, actions=None) -> dict:
     """Metric, cube lift (mm) and closest finger-cube approach (mm) with ``actions``."""
     from dbtool.sim.rollout import simulate
-    from dbtool.sim.tasks.base import SPACING
+    from dbtool.sim.tasks.base import DX
 
     ro = simulate(task, robot, actions)
     ep, P = ro.episode, ro.positions
@@ -66,7 +68,16 @@ def grip(task, robot, actions=None) -> dict:
     closest = float(np.linalg.norm(gap, axis=2).min() * MM)
     lift = P[:, cube, 1].mean(1)
     return {"metric": float(ro.metric), "lift_mm": float((lift[-1] - lift[0]) * MM),
-            "closest_mm": closest, "touches": closest <= SPACING * MM}
+            "closest_mm": closest, "touches": closest <= DX * MM}
+
+
+def zero_gradient_stops(run: Path) -> tuple[int, int]:
+    """Co-design stops of a run, and how many of them had a zero physics gradient."""
+    if not (run / "metrics.jsonl").is_file():
+        return 0, 0
+    rows = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
+    g = [r["phi_grad"] for r in rows if r.get("phase") == "codesign" and "phi_grad" in r]
+    return len(g), sum(1 for v in g if v == 0)
 
 
 def run_prior_best(run: Path) -> tuple[float | None, float | None]:
@@ -102,8 +113,10 @@ def main() -> None:
         robot = d.robot.compact()
         m0, mall = run_prior_best(run)
         name = run.name if m0 is not None else str(run)
+        stops, zero = zero_gradient_stops(run)
         r = {"design": name, **grip(task, robot, d.controller), "root_mm": held(task, robot),
-             "root_sites": root_sites(task, robot), "prior_epoch0_best": m0, "embedding_best": mall}
+             "root_sites": root_sites(task, robot), "prior_epoch0_best": m0, "embedding_best": mall,
+             "codesign_stops": stops, "zero_gradient_stops": zero}
         rows.append(r)
         print(r, flush=True)
     des = [r for r in rows[1:] if r["prior_epoch0_best"] is not None]
@@ -119,6 +132,8 @@ def main() -> None:
             "all_touch": all(r["touches"] for r in des),
             "all_lift": all(r["lift_mm"] > 0 for r in des),
             "beats_block": int((m > rows[0]["metric"]).sum()),
+            "codesign_stops": sum(r["codesign_stops"] for r in des),
+            "zero_gradient_stops": sum(r["zero_gradient_stops"] for r in des),
             "paired_vs_prior_epoch0": {
                 "mean": float(diff.mean()),
                 "sd": float(diff.std(ddof=1)) if len(diff) > 1 else 0.0,
