@@ -80,6 +80,38 @@ def zero_gradient_stops(run: Path) -> tuple[int, int]:
     return len(g), sum(1 for v in g if v == 0)
 
 
+def side_view(task, robot, actions, path: Path, steps=(0, 25, 50, 75, 100)) -> None:
+    """The rollout seen along x (the fingers close along z): base, fingers and cube at
+    ``steps``, mm at the export's scale, the cube's lift in each panel's title."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from dbtool.sim.rollout import simulate
+
+    ro = simulate(task, robot, actions)
+    ep, P = ro.episode, ro.positions
+    on = ep.particles.phi > 0
+    finger, cube = ep.info["finger"], ep.object_mask
+    parts = [(on & ep.robot_mask & (finger == 0), "#f5a623", "base"),
+             (on & (finger == 1), "#d62728", "finger"), (on & (finger == 2), "#1f77b4", "mirror"),
+             (cube, "0.45", "cube")]
+    fig, axes = plt.subplots(1, len(steps), figsize=(3 * len(steps), 3.4), sharey=True)
+    c0 = P[0, cube, 1].mean()
+    for ax, k in zip(axes, steps, strict=True):
+        for m, col, _ in parts:
+            ax.scatter(P[k, m, 2] * MM, P[k, m, 1] * MM, s=1, c=col, linewidths=0)
+        ax.set_title(f"step {k}: cube {(P[k, cube, 1].mean() - c0) * MM:+.1f} mm", fontsize=9)
+        ax.set_aspect("equal")
+        ax.set_xlabel("z (mm)")
+    axes[0].set_ylabel("y (mm)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def run_prior_best(run: Path) -> tuple[float | None, float | None]:
     """Best epoch-0 (null-embedding) sample and best embedding-epoch sample of a run (None for
     a folder without a run's metrics, e.g. an export)."""
@@ -96,6 +128,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", nargs="+", type=Path)
     ap.add_argument("--out", type=Path)
+    ap.add_argument("--figures", type=Path, help="write each design's side view here")
     a = ap.parse_args()
     from dbtool.design import Design
     from dbtool.robotize.actuators import reference_robot
@@ -119,6 +152,8 @@ def main() -> None:
              "codesign_stops": stops, "zero_gradient_stops": zero}
         rows.append(r)
         print(r, flush=True)
+        if a.figures:
+            side_view(task, robot, d.controller, a.figures / f"{name}-side.png")
     des = [r for r in rows[1:] if r["prior_epoch0_best"] is not None]
     summary = {}
     if des:

@@ -21,7 +21,10 @@ from dbtool.realgap.run import open_bench, replay, simulate
 
 REF = Path(__file__).resolve().parents[1] / "exports" / "gripping-seed0"
 RETURN_TOL_MM = 0.5  # release back to 0 ends this close to the start (measured 0.28)
-REST_TOL_MM = 0.5  # simulated rest vs the exported meshes' fingertips (measured 0.15)
+# simulated rest vs the exported meshes' fingertips: measured 0.15 mm on the earlier reference
+# and 0.61 on the current one, whose tips are strands that the smoothed mesh thins (its lattice
+# tips, before any step, are 75.43 mm apart against 75.45 simulated at rest: the gap is meshing)
+REST_TOL_MM = 1.0
 # the calibration tests' protocol: pull the flexion tendon 5 mm and release it
 PULL_5MM = {"flexion": standard_schedule(5.0, 5.0)["flexion"]}
 
@@ -109,6 +112,13 @@ def test_calibration_recovers_a_hidden_gain(bench):
     assert cal.rmse_after_mm < 0.2 * cal.rmse_before_mm
 
 
+# On the earlier reference: 1.2e-3 (gain), 1.2e-3 (stiffness), 1.7e-4 (friction). On the current
+# one d loss / d stiffness scale is 56 times smaller than d loss / d gain, and the float32
+# central differences themselves do not settle: -0.00551, -0.00542, -0.00564, -0.00590 for
+# eps = 0.01, 0.02, 0.05, 0.1, against the adjoint's -0.00534 (gain: rel. err. 8e-4).
+TOL = {"gain": 0.01, "stiffness_scale": 0.1, "friction_mm": 0.01}
+
+
 def test_calibration_gradient_matches_central_differences(bench):
     """The adjoint gradient of the protocol's loss (readings seeded along the episode) against
     central differences of the simulated protocol, for the three fitted parameters. The 5 mm
@@ -131,4 +141,4 @@ def test_calibration_gradient_matches_central_differences(bench):
         fd = (lp - lm) / (2 * eps)
         rel = abs(fd - grad[j]) / abs(fd)
         print(f"d loss / d {name}: fd {fd:.6g}, adjoint {grad[j]:.6g}, rel. err {rel:.2e}")
-        assert rel < 0.01  # measured 1.2e-3 (gain), 1.2e-3 (stiffness), 1.7e-4 (friction)
+        assert rel < TOL[name]
