@@ -5,7 +5,9 @@ actuation for 300 control steps (the root, the finger's particles within 3 mm of
 far its centroid moves, mm at the export's scale), then with its own controller for 100
 steps (the metric, the cube's lift, the closest finger-cube approach, and whether they come
 within one grid cell: the range at which MLS-MPM's shared grid couples two bodies, so the
-cube is lifted across gaps of up to about 3 mm at the export's scale). Beside them: the block
+cube is lifted across gaps of up to about 3 mm at the export's scale), and how high the cube's
+underside stood above where it rested at a step when no finger was within one grid cell of
+it (``raised_apart_mm``: a cube in the air that nothing touches should fall). Beside them: the block
 finger under the prescribed controller, and the best prior sample each run scored from the
 null embedding (its embedding epoch 0, the same prior at that run's first 12 draws) and over
 all its embedding epochs. Prints a table and writes
@@ -65,10 +67,15 @@ def grip(task, robot, actions=None) -> dict:
     cube = ep.object_mask
     lo, hi = P[:, cube].min(1), P[:, cube].max(1)  # the cube's box per step
     gap = np.maximum(np.maximum(lo[:, None] - P[:, fingers], P[:, fingers] - hi[:, None]), 0)
-    closest = float(np.linalg.norm(gap, axis=2).min() * MM)
+    near = np.linalg.norm(gap, axis=2).min(1) * MM  # closest finger per step (mm)
+    closest = float(near.min())
     lift = P[:, cube, 1].mean(1)
+    raised = (lo[:, 1] - lo[0, 1]) * MM  # the cube's underside above where it rested (mm)
+    apart = near > DX * MM
     return {"metric": float(ro.metric), "lift_mm": float((lift[-1] - lift[0]) * MM),
-            "closest_mm": closest, "touches": closest <= DX * MM}
+            "closest_mm": closest, "touches": closest <= DX * MM,
+            "closest_at_end_mm": float(near[-1]),
+            "raised_apart_mm": float(raised[apart].max()) if apart.any() else 0.0}
 
 
 def zero_gradient_stops(run: Path) -> tuple[int, int]:
@@ -166,6 +173,7 @@ def main() -> None:
             "all_attached": all(r["root_mm"] < 0.1 for r in des),
             "all_touch": all(r["touches"] for r in des),
             "all_lift": all(r["lift_mm"] > 0 for r in des),
+            "raised_apart_mm_max": max(r["raised_apart_mm"] for r in des),
             "beats_block": int((m > rows[0]["metric"]).sum()),
             "codesign_stops": sum(r["codesign_stops"] for r in des),
             "zero_gradient_stops": sum(r["zero_gradient_stops"] for r in des),
