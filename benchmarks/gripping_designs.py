@@ -131,12 +131,33 @@ def run_prior_best(run: Path) -> tuple[float | None, float | None]:
     return float(m0), float(allm)
 
 
+def table(rows: list[dict]) -> str:
+    """The rows as the markdown table of docs/results.md."""
+    out = ["| design | metric (cube lift, m) | root moved at rest (mm) | root sites | closest "
+           "approach (mm) | cube raised with no finger within a cell (mm) | best prior sample "
+           "of the run's epoch 0 |", "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    for r in rows:
+        p0 = r.get("prior_epoch0_best")
+        out.append(f"| {r['design']} | {r['metric']:.5f} | {r['root_mm']:.3f} | "
+                   f"{r['root_sites']} | {r['closest_mm']:.2f} | {r['raised_apart_mm']:.2f} | "
+                   f"{'—' if p0 is None else f'{p0:.5f}'} |")
+    return "\n".join(out) + "\n"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("runs", nargs="+", type=Path)
+    ap.add_argument("runs", nargs="*", type=Path)
+    ap.add_argument("--table", type=Path, help="write the markdown table of --out (or the "
+                    "default result) here; with no runs, only that")
     ap.add_argument("--out", type=Path)
     ap.add_argument("--figures", type=Path, help="write each design's side view here")
     a = ap.parse_args()
+    if not a.runs:
+        if not a.table:
+            ap.error("give run folders, or --table")
+        res = json.loads((a.out or RESULTS / "gripping-designs.json").read_text())
+        a.table.write_text(table(res["rows"]))
+        return
     from dbtool.design import Design
     from dbtool.robotize.actuators import reference_robot
     from dbtool.sim.tasks import get_task
@@ -187,6 +208,8 @@ def main() -> None:
     print(summary)
     write_result({"rows": rows, "summary": summary}, a.out, RESULTS / "gripping-designs.json",
                  False, {"runs": [str(r) for r in a.runs]})
+    if a.table:
+        a.table.write_text(table(rows))
 
 
 if __name__ == "__main__":
