@@ -61,7 +61,8 @@ print(f"design metric (cube lift) {design.metrics[design.task]:.5f} m; files: {r
 # glued to the base with the pins in the pockets of their root faces. Each finger carries a
 # flexion tendon along its inner actuator region (red: it curls the finger onto the object) and
 # an extension tendon along the outer one (blue), from the tube seat at the top of the base
-# through the four routing points to a knot pocket at the fingertip.
+# through the four routing points to the fingertip, where the knot sits in a pocket when the
+# tip has room for one (the reference finger's strand tips do not: its knots sit on the surface).
 
 # %%
 display(Image(str(out / "exploded.png")))
