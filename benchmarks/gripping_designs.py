@@ -56,12 +56,10 @@ def held(task, robot, steps: int = 300) -> float:
     return float(np.linalg.norm(c - c[0], axis=1).max() * MM)
 
 
-def grip(task, robot, actions=None) -> dict:
-    """Metric, cube lift (mm) and closest finger-cube approach (mm) with ``actions``."""
-    from dbtool.sim.rollout import simulate
+def grip(ro) -> dict:
+    """Metric, cube lift (mm) and closest finger-cube approach (mm) of a rollout."""
     from dbtool.sim.tasks.base import DX
 
-    ro = simulate(task, robot, actions)
     ep, P = ro.episode, ro.positions
     fingers = (ep.info["finger"] > 0) & (ep.particles.phi > 0)
     cube = ep.object_mask
@@ -87,17 +85,14 @@ def zero_gradient_stops(run: Path) -> tuple[int, int]:
     return len(g), sum(1 for v in g if v == 0)
 
 
-def side_view(task, robot, actions, path: Path, steps=(0, 25, 50, 75, 100)) -> None:
-    """The rollout seen along x (the fingers close along z): base, fingers and cube at
+def side_view(ro, path: Path, steps=(0, 25, 50, 75, 100)) -> None:
+    """A rollout seen along x (the fingers close along z): base, fingers and cube at
     ``steps``, mm at the export's scale, the cube's lift in each panel's title."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from dbtool.sim.rollout import simulate
-
-    ro = simulate(task, robot, actions)
     ep, P = ro.episode, ro.positions
     on = ep.particles.phi > 0
     finger, cube = ep.info["finger"], ep.object_mask
@@ -160,11 +155,12 @@ def main() -> None:
         return
     from dbtool.design import Design
     from dbtool.robotize.actuators import reference_robot
+    from dbtool.sim.rollout import simulate
     from dbtool.sim.tasks import get_task
 
     task = get_task("gripping")
     block = reference_robot(task, "box").compact()
-    rows = [{"design": "block finger (prescribed controller)", **grip(task, block),
+    rows = [{"design": "block finger (prescribed controller)", **grip(simulate(task, block)),
              "root_mm": held(task, block), "root_sites": root_sites(task, block)}]
     print(rows[0], flush=True)
     for run in sorted(a.runs):
@@ -175,13 +171,14 @@ def main() -> None:
         m0, mall = run_prior_best(run)
         name = run.name if m0 is not None else str(run)
         stops, zero = zero_gradient_stops(run)
-        r = {"design": name, **grip(task, robot, d.controller), "root_mm": held(task, robot),
+        ro = simulate(task, robot, d.controller)
+        r = {"design": name, **grip(ro), "root_mm": held(task, robot),
              "root_sites": root_sites(task, robot), "prior_epoch0_best": m0, "embedding_best": mall,
              "codesign_stops": stops, "zero_gradient_stops": zero}
         rows.append(r)
         print(r, flush=True)
         if a.figures:
-            side_view(task, robot, d.controller, a.figures / f"{name}-side.png")
+            side_view(ro, a.figures / f"{name}-side.png")
     des = [r for r in rows[1:] if r["prior_epoch0_best"] is not None]
     summary = {}
     if des:
