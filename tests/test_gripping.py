@@ -140,36 +140,54 @@ def test_the_prescribed_controller_closes_the_fingers_on_the_cube():
     print("tip distance (mm) every 5 steps:", np.round(d[::5], 1))
     assert np.all(np.diff(d[:11]) <= 1e-3), "the tips do not close at the ramp's start"
     assert d[10] < d[0] - 5.0, f"tip distance {d[0]:.1f} -> {d[10]:.1f} mm"
-    assert d[50:61].min() < d[50] - 3.0, "the second ramp does not close them again"
+    # the fingers are still swinging open at step 50 (79.1 mm, widest 83.7 at step 54); the
+    # second ramp stops them and closes them again (76.2 at step 60, 68.8 at step 90)
+    assert d[50:71].min() < d[50:56].max() - 5.0, "the second ramp does not close them again"
 
 
 def test_a_block_finger_lifts_the_cube():
-    ro = _block_rollout()
-    ep = ro.episode
-    cube = ro.positions[:, ep.object_mask, 1].mean(1)
-    print(f"block finger: metric {ro.metric:.5f}, cube centre lift per 10 steps "
-          f"{np.round((cube[::10] - cube[0]) * MM, 2)} mm")
-    assert ro.metric > 0.002
-
-
-@pytest.mark.xfail(strict=True, reason="MLS-MPM's single velocity field couples the cube to "
-                   "fingers up to three grid cells away (docs/results.md, Gripping with the "
-                   "clamp): measured 2.79 mm")
-def test_a_cube_no_finger_is_near_does_not_stand_in_the_air():
-    """What a person checks by eye: at a step when no finger particle is within one grid cell
-    of the cube, the cube's underside is not above where it rested (by more than 0.5 mm)."""
+    """The block finger squeezes the cube off the ground and flings it up: its centre rises
+    8.8 mm by step 80 while the fingers touch it and is 2.0 mm up, in flight, at the episode's
+    end (metric 0.00200; it was 0.00265 when the cube shared the fingers' grid field)."""
     from dbtool.sim.tasks.base import DX
 
+    ro = _block_rollout()
+    ep, P = ro.episode, ro.positions
+    cube = P[:, ep.object_mask, 1].mean(1)
+    lift = (cube - cube[0]) * MM
+    fingers = (ep.info["finger"] > 0) & (ep.particles.phi > 0)
+    lo, hi = P[:, ep.object_mask].min(1), P[:, ep.object_mask].max(1)
+    gap = np.maximum(np.maximum(lo[:, None] - P[:, fingers], P[:, fingers] - hi[:, None]), 0)
+    touching = np.linalg.norm(gap, axis=2).min(1) < DX
+    print(f"block finger: metric {ro.metric:.7f}, cube centre lift per 10 steps "
+          f"{np.round(lift[::10], 2)} mm")
+    assert lift[touching].max() > 5.0
+    assert ro.metric > 0.0015
+
+
+def test_a_cube_no_finger_touches_is_in_free_flight():
+    """What a person checks by eye: whenever no finger particle is within one grid cell of
+    the cube and the cube is off the ground, nothing holds it up: its centre accelerates at
+    g downwards (once the fingers shared its grid nodes and it stood in the air)."""
+    from dbtool.sim.model import SUBSTEPS
+    from dbtool.sim.tasks.base import DX
+
+    task = get_task("gripping")
     ro = _block_rollout()
     ep, P = ro.episode, ro.positions
     cube = ep.object_mask
     fingers = (ep.info["finger"] > 0) & (ep.particles.phi > 0)
     lo, hi = P[:, cube].min(1), P[:, cube].max(1)
     gap = np.maximum(np.maximum(lo[:, None] - P[:, fingers], P[:, fingers] - hi[:, None]), 0)
-    apart = np.linalg.norm(gap, axis=2).min(1) > DX
-    raised = (lo[:, 1] - lo[0, 1]) * MM
-    print(f"cube underside raised {raised[apart].max():.2f} mm with no finger within a cell")
-    assert apart.any() and raised[apart].max() < 0.5
+    free = (np.linalg.norm(gap, axis=2).min(1) > DX) & (lo[:, 1] > lo[0, 1] + 0.001)
+    free = free[:-2] & free[1:-1] & free[2:]  # steps t-1, t, t+1 all free
+    dt = SUBSTEPS * task.material.dt
+    c = P[:, cube, 1].mean(1)
+    acc = (c[2:] - 2 * c[1:-1] + c[:-2]) / dt**2
+    g = ep.scene.gravity
+    print(f"{free.sum()} free steps, acceleration {np.round(acc[free], 2)} (g = {g})")
+    assert free.sum() >= 3
+    assert np.all(np.abs(acc[free] + g) < 0.1 * g)
 
 
 def test_the_task_declares_its_traits():
@@ -183,7 +201,10 @@ def test_the_task_declares_its_traits():
             t = get_task(name)
             assert not t.hangs and t.mirror_plane() is None and not t.gripper
     d = grip.describe()
-    assert d["cube_stiffness"] > 0 and "no slip" in d["finger_cube_contact"]
+    assert d["cube_stiffness"] > 0 and d["finger_cube_friction"] > 0
+    assert grip.scene().object_friction == d["finger_cube_friction"]
+    for name in TASKS:  # only the gripper's cube has its own velocity field
+        assert (get_task(name).scene().object_friction is not None) == (name == "gripping")
 
 
 def _cut(robot, below: float, above: float):

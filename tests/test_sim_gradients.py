@@ -212,7 +212,7 @@ def test_gradients_through_a_clamped_gripping_episode():
 
     def loss(phi=p.phi, E=p.E, a=acts, clamp=True, damping=p.damping) -> float:
         parts = Particles(x0=p.x0, phi=phi, E=E, wact=p.wact, adir=p.adir, glued=p.glued,
-                          v0=p.v0, damping=damping)
+                          v0=p.v0, damping=damping, field=p.field)
         s = Simulator(ep.scene, parts, task.material, n_steps=STEPS)
         if not clamp:
             s.grid.clamp.fill(0)
@@ -245,3 +245,76 @@ def test_gradients_through_a_clamped_gripping_episode():
         print(f"clamped gripping d/d{name}: fd={fd:.9e} analytic={an:.9e} rel.err={rel:.2e}")
         assert abs(lp - lm) > 1e-10
         assert rel < TOL, f"{name}: fd {fd} vs analytic {an} (rel {rel:.2e})"
+
+
+def test_gradients_through_frictional_contact_between_velocity_fields():
+    """Two bodies thrown into each other on the ground, the second one a task object with its
+    own velocity field (docs/method.md §3, "Contact"): gradients w.r.t. every particle field,
+    the actions and the initial state match central differences, and the contact and its
+    friction really shape the episode."""
+    rng = np.random.default_rng(2)
+    side, sp = 8, 0.0025
+    g = (np.stack(np.meshgrid(*[np.arange(side)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5)
+    a = g * sp + np.array([0.03, 0.0151, 0.04])
+    b = g * sp + np.array([0.054, 0.0151, 0.042])  # 4 mm to the right, offset along z
+    x0 = np.concatenate([a, b])
+    n, m = len(x0), len(a)
+    field = np.r_[np.zeros(m), np.ones(m)]
+    v0 = np.concatenate([np.tile([0.35, 0.0, 0.15], (m, 1)), np.tile([-0.3, 0.1, -0.1], (m, 1))])
+    wact = np.zeros((n, 4))
+    wact[:m, 0] = g[:, 0] < side / 2
+    wact[:m, 1] = 1 - wact[:m, 0]
+    phi, E = rng.uniform(0.6, 1, n), rng.uniform(2e4, 4e4, n)
+
+    def particles(field=field) -> Particles:
+        return Particles(x0=x0.copy(), phi=phi.copy(), E=E.copy(), wact=wact.copy(),
+                         adir=np.tile([0, 1.0, 0], (n, 1)), glued=np.zeros(n), v0=v0.copy(),
+                         field=field)
+
+    def scene(mu=0.5) -> Scene:
+        return Scene(size=(0.12, 0.08, 0.1), object_friction=mu)
+
+    sim = Simulator(scene(), particles(), n_steps=STEPS)
+    assert sim.multi
+    acts = 0.3 * np.sin(np.arange(STEPS)[:, None] * 0.7 + np.arange(2)[None])
+    w = rng.normal(size=(n, 3))
+
+    def loss(s: Simulator = sim) -> float:
+        s.forward(acts)
+        return float((s.final_state()["x"] * w).sum())
+
+    base = loss()
+    grads = sim.backward(w)
+    for label, other in (("the contact's friction", Simulator(scene(0.0), particles(),
+                                                               n_steps=STEPS)),
+                         ("separate fields", Simulator(scene(None), particles(),
+                                                       n_steps=STEPS))):
+        change = abs(loss(other) - base)
+        print(f"without {label}: loss changes by {change:.3e}")
+        assert change > 1e-4, f"{label} does not shape the episode"
+
+    def check(name, get, put, eps):
+        value = get().copy()
+        d = rng.normal(size=value.shape)
+        put(value + eps * d)
+        lp = loss()
+        put(value - eps * d)
+        lm = loss()
+        put(value)
+        fd = (lp - lm) / (2 * eps)
+        an = float((grads[name][..., : value.shape[-1]] * d).sum())
+        rel = abs(fd - an) / max(abs(fd), 1e-12)
+        print(f"contact d/d{name}: fd={fd:.9e} analytic={an:.9e} rel.err={rel:.2e}")
+        assert abs(lp - lm) > 1e-10, f"{name}: the loss does not depend on it (fd {fd})"
+        assert rel < TOL, f"{name}: fd {fd} vs analytic {an} (rel {rel:.2e})"
+
+    def put_actions(a):
+        nonlocal acts
+        acts = a
+
+    check("phi", lambda: sim.p.phi, lambda a: sim.set_particle_fields(phi=a), 1e-5)
+    check("E", lambda: sim.p.E, lambda a: sim.set_particle_fields(E=a), 1e-1)
+    check("wact", lambda: sim.p.wact, lambda a: sim.set_particle_fields(wact=a), 1e-5)
+    check("actions", lambda: acts, put_actions, 1e-5)
+    check("x0", lambda: sim.p.x0, lambda a: setattr(sim.p, "x0", a), 1e-7)
+    check("v0", lambda: sim.p.v0, lambda a: setattr(sim.p, "v0", a), 1e-5)

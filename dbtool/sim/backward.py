@@ -21,16 +21,19 @@ from dbtool.sim.stepper import Region, Stepper
 def _substep_adjoint(sp: Stepper, adj: Adjoint, s: int, r: Region) -> None:
     """Adjoint of substep ``s``: g2p, grid_op, then p2g with the stress."""
     sc, m, st, g, b, n = sp.scene, sp.mat, sp.state, sp.grid, sp.body, sp.n
+    multi, mu_c = g.multi, sc.object_friction or 0.0
     if sp.atomic:
-        KA.g2p_grad_atomic(st.x, g.v, b.glued, adj.x, adj.v, adj.C, adj.scratch, s, n, *r,
-                           sc.dx, m.dt)
+        KA.g2p_grad_atomic(st.x, g.v, b.glued, b.field, g.ov, adj.x, adj.v, adj.C, adj.scratch,
+                           adj.oscratch, s, n, *r, sc.dx, m.dt, multi)
     else:
-        KA.g2p_grad(st.x, g.v, b.glued, adj.x, adj.v, adj.C, adj.scratch, s, n, sp.chunks, *r,
-                    sc.dx, m.dt)
-    KA.grid_op_grad(adj.scratch, g.m, g.vin, adj.grid, sp.boxes, g.clamp, s, sp.chunks,
-                    *sp.dims, *r,
-                    sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction, sc.damp(m.dt))
-    KA.p2g_grad(*st, *b.stress, adj.grid, *adj.p2g, s, n, *r, *sp.consts)
+        KA.g2p_grad(st.x, g.v, b.glued, b.field, g.ov, adj.x, adj.v, adj.C, adj.scratch,
+                    adj.oscratch, s, n, sp.chunks, *r, sc.dx, m.dt, multi)
+    KA.grid_op_grad(adj.scratch, g.m, g.vin, adj.grid, sp.boxes, g.clamp, adj.oscratch, g.om,
+                    g.ovin, g.r0, g.o0, g.gm, g.og, adj.ogrid, adj.ngrid, s, sp.chunks,
+                    *sp.dims, *r, sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction,
+                    sc.damp(m.dt), multi, mu_c)
+    KA.p2g_grad(*st, *b.stress, adj.grid, adj.ogrid, adj.ngrid, *adj.p2g, s, n, *r,
+                *sp.consts, multi)
 
 
 def _seed(adj: Adjoint, slot: int, g: np.ndarray) -> None:

@@ -21,6 +21,9 @@ A substep is ``stress -> p2g -> grid_op -> g2p``:
   the clamp: a kinematic boundary that holds every node a glued particle's stencil touches
   at rest (no slip), so what hangs from a glued part is held by the grid it shares with it.
   Works on the active region ``[lo, hi)`` of the grid only.
+* Contact (``multi``): a task object with its own velocity field scatters into and gathers
+  from its own grid arrays; where it moves into the robot at a node, :func:`_contact` removes
+  the normal relative velocity with Coulomb friction (docs/method.md §3, "Contact").
 
 The arguments come in a fixed order, built by the containers of :mod:`dbtool.sim.state`:
 particle state ``(x, v, C, F)``, body fields ``(phi, E, actp, adir)``, grid arrays, the slot
@@ -37,6 +40,16 @@ BOUND = 3  # wall thickness in cells
 # iterations over ``chunks * SPREAD`` indices (only every SPREAD-th does work) lets each chunk
 # land on its own thread. Every chunk is still processed by exactly one iteration.
 SPREAD = 4096
+# Contact between separate velocity fields engages at a node only where the mass-weighted
+# centres of the robot's and the object's particles around it are less than this many cells
+# apart along the contact normal: about 0.85-1.4 cells when the bodies touch, 1.2-1.5 when
+# half a cell (one particle spacing) of air separates them (docs/method.md §3, "Contact").
+CONTACT_GAP = 1.1
+# The ground holds an object's node only where the mass-weighted height of the object's
+# particles around it is less than this many cells above the ground: about 0.4 cells when the
+# object rests on it, 0.6 when a quarter cell (1.25 mm) of air separates them. Without it a
+# grid ground holds a body up to a cell above it (docs/method.md §3, "Contact").
+GROUND_GAP = 0.5
 
 nd = ti.types.ndarray  # kernel annotations must not be strings: no postponed annotations here
 
@@ -109,11 +122,28 @@ def actuation(wact: nd(), act: nd(), actp: nd(), t: ti.i32, n: ti.i32):
 
 # --------------------------------------------------------------------------- p2g
 @ti.func
+def _scatter(arr: ti.template(), c, I, val, atomic: ti.template()):
+    """Add ``val`` to node ``I`` of grid copy ``c`` (atomic on the GPU, plain on the CPU)."""
+    if ti.static(atomic):
+        arr[c, I[0], I[1], I[2]] += val
+    else:
+        arr[c, I[0], I[1], I[2]] = arr[c, I[0], I[1], I[2]] + val
+
+
+@ti.func
+def _dweights(w, dw, i: ti.template(), j: ti.template(), k: ti.template()):
+    """Gradient of the node weight ``w_i w_j w_k`` with respect to ``fx``."""
+    return ti.Vector([dw[i][0] * w[j][1] * w[k][2], w[i][0] * dw[j][1] * w[k][2],
+                      w[i][0] * w[j][1] * dw[k][2]])
+
+
+@ti.func
 def _p2g_particle(
     x: ti.template(), v: ti.template(), C: ti.template(), F: ti.template(), phi: ti.template(),
     E: ti.template(), actp: ti.template(), adir: ti.template(), damp: ti.template(),
-    scratch: ti.template(), s, p, c, lo, hi, dx, dt, p_vol, p_rho, nu, act_strength,
-    atomic: ti.template(),
+    field: ti.template(), scratch: ti.template(), oscratch: ti.template(),
+    nscratch: ti.template(), xscratch: ti.template(), s, p, c, lo, hi, dx, dt, p_vol, p_rho, nu,
+    act_strength, multi, atomic: ti.template(),
 ):
     Ap = _stress(C, F, phi, E, actp, adir, s, p, dx, dt, p_vol, p_rho, nu, act_strength)
     m_unit = p_rho * p_vol
@@ -121,30 +151,42 @@ def _p2g_particle(
     xp = x[s, p]
     base = _base(xp, inv_dx, lo, hi)
     fx = xp * inv_dx - ti.cast(base, float)
-    w, _dw = _weights(fx)
+    w, dw = _weights(fx)
     m = m_unit * phi[p]
     mv = (m * damp[p]) * v[s, p]
+    obj = multi != 0 and field[p] > 0.0
     for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
         off = ti.Vector([i, j, k])
         wt = w[i][0] * w[j][1] * w[k][2]
         mom = wt * (mv + Ap @ ((ti.cast(off, float) - fx) * dx))
         val = ti.Vector([mom[0], mom[1], mom[2], wt * m])
         I = base + off
-        if ti.static(atomic):
-            scratch[c, I[0], I[1], I[2]] += val
+        if obj:
+            _scatter(oscratch, c, I, val, atomic)
+            gw = (m * inv_dx) * _dweights(w, dw, i, j, k)
+            mx = (wt * m) * xp
+            _scatter(nscratch, c, I, ti.Vector([gw[0], gw[1], gw[2], mx[0], mx[1], mx[2]]),
+                     atomic)
         else:
-            scratch[c, I[0], I[1], I[2]] = scratch[c, I[0], I[1], I[2]] + val
+            _scatter(scratch, c, I, val, atomic)
+            if multi != 0:
+                _scatter(xscratch, c, I, (wt * m) * xp, atomic)
 
 
 @ti.kernel
 def p2g(
     x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(), damp: nd(),
-    scratch: nd(), s: ti.i32, n: ti.i32, chunks: ti.i32,
-    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
+    field: nd(), scratch: nd(), oscratch: nd(), nscratch: nd(), xscratch: nd(), s: ti.i32,
+    n: ti.i32, chunks: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32,
+    hz: ti.i32,
     dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
+    multi: ti.i32,
 ):
     """Stress, then scatter of mass and APIC momentum; ``chunks`` particle ranges go into
-    separate grid copies with plain adds (one range per CPU thread)."""
+    separate grid copies with plain adds (one range per CPU thread). With ``multi`` the
+    object particles (``field`` 1) scatter into their own field ``oscratch`` and their mass
+    gradient and mass-weighted positions into ``nscratch``; the robot's mass-weighted
+    positions go into ``xscratch``."""
     lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
     for q in range(chunks * SPREAD):
         if q % SPREAD != 0:
@@ -152,22 +194,25 @@ def p2g(
         c = q // SPREAD
         a, b = _range(c, chunks, n)
         for p in range(a, b):
-            _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, scratch, s, p, c, lo, hi,
-                          dx, dt, p_vol, p_rho, nu, act_strength, False)
+            _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, field, scratch, oscratch,
+                          nscratch, xscratch, s, p, c, lo, hi, dx, dt, p_vol, p_rho, nu,
+                          act_strength, multi, False)
 
 
 @ti.kernel
 def p2g_atomic(
     x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(), damp: nd(),
-    scratch: nd(), s: ti.i32, n: ti.i32,
-    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
+    field: nd(), scratch: nd(), oscratch: nd(), nscratch: nd(), xscratch: nd(), s: ti.i32,
+    n: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
     dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
+    multi: ti.i32,
 ):
     """Massively parallel variant of :func:`p2g` (GPU): one grid copy, atomic adds."""
     lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
     for p in range(n):
-        _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, scratch, s, p, 0, lo, hi,
-                      dx, dt, p_vol, p_rho, nu, act_strength, True)
+        _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, field, scratch, oscratch,
+                      nscratch, xscratch, s, p, 0, lo, hi, dx, dt, p_vol, p_rho, nu, act_strength,
+                      multi, True)
 
 
 # --------------------------------------------------------------------------- grid
@@ -227,30 +272,119 @@ def _colliders(pos, v, boxes: ti.template(), ground_y, mu_f):
     return v0, v1, v2, v
 
 
+@ti.func
+def _boundary(I, vin, boxes: ti.template(), ground_y, mu_f, dims, dx, held):
+    """Colliders, domain walls and the clamp (``held`` 1 at a clamped node) on a node
+    velocity."""
+    _v0, _v1, _v2, v3 = _colliders(I * dx, vin, boxes, ground_y, mu_f)
+    return v3 * _wall_mask(I, v3, dims) * (1.0 - held)
+
+
+@ti.func
+def _contact_normal(gm):
+    """Unit outward normal of the object at a node from its mass gradient ``gm`` (the sum of
+    ``m_p dw_ip/dx_p``, minus the spatial gradient of the object's mass field) and its norm."""
+    ln = ti.sqrt(gm.dot(gm))
+    nrm = ti.Vector([0.0, 0.0, 0.0])
+    if ln > 0.0:
+        nrm = gm / ln
+    return nrm, ln
+
+
+@ti.func
+def _contact(vr, mr, vo, mo, gm, mu_c):
+    """Multi-velocity-field contact at a node holding robot (``vr``, ``mr``) and object
+    (``vo``, ``mo``) mass: where the object moves towards the robot along its outward normal,
+    the pair exchanges momentum so that the normal relative velocity vanishes, with Coulomb
+    friction ``mu_c`` on the tangential one (stick when it suffices); where they separate,
+    each keeps its own velocity. Momentum is conserved: ``vr += a d``, ``vo -= b d`` with
+    ``a = mo / M``, ``b = mr / M``."""
+    nrm, ln = _contact_normal(gm)
+    w = vo - vr
+    sn = w.dot(nrm)
+    d = ti.Vector([0.0, 0.0, 0.0])
+    if ln > 0.0 and sn > 0.0:
+        wt = w - sn * nrm
+        lt = ti.sqrt(wt.dot(wt) + 1e-30)
+        if lt <= mu_c * sn:
+            d = w
+        else:
+            d = sn * nrm + (mu_c * sn / lt) * wt
+    total = mr + mo
+    return vr + (mo / total) * d, vo - (mr / total) * d
+
+
 @ti.kernel
 def grid_op(
     scratch: nd(), grid_m: nd(), grid_vin: nd(), grid_v: nd(), boxes: nd(), clamp: nd(),
+    oscratch: nd(), nscratch: nd(), xscratch: nd(), grid_om: nd(), grid_ovin: nd(),
+    grid_ov: nd(), grid_r0: nd(), grid_o0: nd(), grid_gm: nd(), grid_og: nd(),
     s: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
     dx: float, dt: float, gravity: float, ground_y: float, mu_f: float, damp: float,
+    multi: ti.i32, mu_c: float,
 ):
     """Sum the p2g copies (and clear them), then velocity update and boundary conditions;
     ``damp`` scales the velocity each substep (mass-proportional damping; 1 = none);
-    ``clamp`` is 1 at the clamped nodes (their velocity is zero) and 0 elsewhere."""
+    ``clamp`` is 1 at the clamped nodes (their velocity is zero) and 0 elsewhere. With
+    ``multi`` the object field gets the same update, then robot and object meet by
+    :func:`_contact` (friction ``mu_c``) before the boundary conditions; ``grid_r0``,
+    ``grid_o0`` and ``grid_gm`` keep the velocities before contact and the object's mass
+    gradient for the adjoint, ``grid_vin``/``grid_ovin`` the velocities after it. The
+    object's ground acts only where its particles are within ``GROUND_GAP`` of it
+    (``grid_og``: the ground height used at each node, -1 for none)."""
     for i, j, k in ti.ndrange((lx, hx), (ly, hy), (lz, hz)):
         acc = ti.Vector([0.0, 0.0, 0.0, 0.0])
         for c in range(chunks):
             acc += scratch[c, i, j, k]
             scratch[c, i, j, k] = ti.Vector([0.0, 0.0, 0.0, 0.0])
         m = acc[3]
+        I = ti.Vector([i, j, k])
+        dims = ti.Vector([nx, ny, nz])
         vin = ti.Vector([0.0, 0.0, 0.0])
         vout = ti.Vector([0.0, 0.0, 0.0])
         if m > 0.0:
             vin = ti.Vector([acc[0], acc[1], acc[2]]) / m * damp
             vin[1] -= dt * gravity
-            I = ti.Vector([i, j, k])
-            _v0, _v1, _v2, v3 = _colliders(I * dx, vin, boxes, ground_y, mu_f)
-            vout = v3 * _wall_mask(I, v3, ti.Vector([nx, ny, nz])) * (1.0 - clamp[i, j, k])
+        if multi != 0:
+            oacc = ti.Vector([0.0, 0.0, 0.0, 0.0])
+            nacc = ti.Vector([0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+            rx = ti.Vector([0.0, 0.0, 0.0])
+            for c in range(chunks):
+                oacc += oscratch[c, i, j, k]
+                nacc += nscratch[c, i, j, k]
+                rx += xscratch[c, i, j, k]
+                oscratch[c, i, j, k] = ti.Vector([0.0, 0.0, 0.0, 0.0])
+                nscratch[c, i, j, k] = ti.Vector([0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+                xscratch[c, i, j, k] = ti.Vector([0.0, 0.0, 0.0])
+            mo = oacc[3]
+            gm = ti.Vector([nacc[0], nacc[1], nacc[2]])
+            ox = ti.Vector([nacc[3], nacc[4], nacc[5]])
+            oground = -1.0  # the object's ground: none unless it is within GROUND_GAP
+            if mo > 0.0 and ox[1] / mo - ground_y < GROUND_GAP * dx:
+                oground = ground_y
+            grid_og[s, i, j, k] = oground
+            if m > 0.0 and mo > 0.0:
+                nrm, _ln = _contact_normal(gm)
+                if (rx / m - ox / mo).dot(nrm) >= CONTACT_GAP * dx:
+                    gm = ti.Vector([0.0, 0.0, 0.0])  # the bodies are apart: no contact here
+            vo = ti.Vector([0.0, 0.0, 0.0])
+            voout = ti.Vector([0.0, 0.0, 0.0])
+            if mo > 0.0:
+                vo = ti.Vector([oacc[0], oacc[1], oacc[2]]) / mo * damp
+                vo[1] -= dt * gravity
+            grid_r0[s, i, j, k] = vin
+            grid_o0[s, i, j, k] = vo
+            grid_gm[s, i, j, k] = gm
+            if m > 0.0 and mo > 0.0:
+                vin, vo = _contact(vin, m, vo, mo, gm, mu_c)
+            if mo > 0.0:
+                voout = _boundary(I, vo, boxes, oground, mu_f, dims, dx, 0.0)
+            grid_om[s, i, j, k] = mo
+            grid_ovin[s, i, j, k] = vo
+            grid_ov[s, i, j, k] = voout
+        if m > 0.0:
+            vout = _boundary(I, vin, boxes, ground_y, mu_f, dims, dx, clamp[i, j, k])
         grid_m[s, i, j, k] = m
         grid_vin[s, i, j, k] = vin
         grid_v[s, i, j, k] = vout
@@ -259,10 +393,12 @@ def grid_op(
 # --------------------------------------------------------------------------- g2p
 @ti.kernel
 def g2p(
-    x: nd(), v: nd(), C: nd(), grid_v: nd(), glued: nd(), s: ti.i32, n: ti.i32,
-    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, dt: float,
+    x: nd(), v: nd(), C: nd(), grid_v: nd(), glued: nd(), field: nd(), grid_ov: nd(),
+    s: ti.i32, n: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32,
+    hz: ti.i32, dx: float, dt: float, multi: ti.i32,
 ):
-    """Gather APIC velocity and affine matrix, then advect (glued particles stay put)."""
+    """Gather APIC velocity and affine matrix, then advect (glued particles stay put); with
+    ``multi`` the object particles gather from their own field ``grid_ov``."""
     lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
     for p in range(n):
         inv_dx = 1.0 / dx
@@ -270,11 +406,14 @@ def g2p(
         base = _base(xp, inv_dx, lo, hi)
         fx = xp * inv_dx - ti.cast(base, float)
         w, _dw = _weights(fx)
+        obj = multi != 0 and field[p] > 0.0
         new_v = ti.Vector([0.0, 0.0, 0.0])
         new_C = ti.Matrix.zero(float, 3, 3)
         for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
             off = ti.Vector([i, j, k])
             gv = grid_v[s, base[0] + i, base[1] + j, base[2] + k]
+            if obj:
+                gv = grid_ov[s, base[0] + i, base[1] + j, base[2] + k]
             wt = w[i][0] * w[j][1] * w[k][2]
             new_v += wt * gv
             new_C += (4.0 * inv_dx * wt) * gv.outer_product(ti.cast(off, float) - fx)

@@ -14,8 +14,11 @@ from dbtool.sim.kernels import (
     _base,
     _box_normal,
     _colliders,
+    _contact_normal,
+    _dweights,
     _moduli,
     _range,
+    _scatter,
     _tau_unit,
     _wall_mask,
     _weights,
@@ -59,19 +62,48 @@ def _stress_vjp(Cp, Fp, e, a, d, ph, G, gFn, dx, dt, p_vol, p_rho, nu, act_stren
     return g_C, g_F, g_ph, g_e, g_a
 
 
+@ti.func
+def _hessian_vjp(w, dw, g, i: ti.template(), j: ti.template(), k: ti.template()):
+    """``H^T g`` for the Hessian ``H`` of the node weight ``w_i w_j w_k`` with respect to
+    ``fx`` (the quadratic B-spline's second derivatives are 1, -2, 1)."""
+    d2 = [1.0, -2.0, 1.0]
+    ww = ti.Vector([w[i][0], w[j][1], w[k][2]])
+    dd = ti.Vector([dw[i][0], dw[j][1], dw[k][2]])
+    hh = ti.Vector([d2[i], d2[j], d2[k]])
+    out = ti.Vector([0.0, 0.0, 0.0])
+    for a in ti.static(range(3)):
+        for b in ti.static(range(3)):
+            h = 1.0
+            for e in ti.static(range(3)):
+                if ti.static(a == b):
+                    if ti.static(e == a):
+                        h *= hh[e]
+                    else:
+                        h *= ww[e]
+                else:
+                    if ti.static(e == a or e == b):
+                        h *= dd[e]
+                    else:
+                        h *= ww[e]
+            out[b] += h * g[a]
+    return out
+
+
 @ti.kernel
 def p2g_grad(
     x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(), damp: nd(),
-    ggrid: nd(),
+    field: nd(), ggrid: nd(), oggrid: nd(), ngrid: nd(),
     xg: nd(), vg: nd(), Cg: nd(), Fg: nd(), phig: nd(), Eg: nd(), actpg: nd(),
     s: ti.i32, n: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
     dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
+    multi: ti.i32,
 ):
     """Adjoint of :func:`p2g` (scatter and stress): gather the node adjoints
-    ``ggrid = (dL/d mv, dL/d m)``, then the constitutive adjoint by hand. Writes the ``v``,
-    ``C`` and ``F`` adjoints of substep ``s``, adds to its ``x`` adjoint and accumulates the
-    ``phi``, ``E`` and muscle-signal adjoints."""
+    ``ggrid = (dL/d mv, dL/d m)`` (``oggrid`` for an object particle with ``multi``, and the
+    adjoint ``ngrid`` of the object's mass gradient), then the constitutive adjoint by hand.
+    Writes the ``v``, ``C`` and ``F`` adjoints of substep ``s``, adds to its ``x`` adjoint and
+    accumulates the ``phi``, ``E`` and muscle-signal adjoints."""
     lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
     for p in range(n):
         inv_dx = 1.0 / dx
@@ -91,24 +123,24 @@ def p2g_grad(
         Fn = (ti.Matrix.identity(float, 3) + dt * Cp) @ Fp
         tau = e * _tau_unit(Fn, Fn @ d, a, nu, act_strength)
         Ap = (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * tau + (m_unit * ph) * Cp
+        obj = multi != 0 and field[p] > 0.0
         # dpos = (off - fx) dx, so A dpos = dx (A off - A fx) and every sum over the nodes of
         # something times dpos splits into a sum with the constant offsets and one with fx.
         Afx = Ap @ fx
         sg = ti.Vector([0.0, 0.0, 0.0])  # sum w g
         sgo = ti.Matrix.zero(float, 3, 3)  # sum w g (x) off
         sc = ti.Vector([0.0, 0.0, 0.0])  # sum (dL/d w) dw/dfx
+        sh = ti.Vector([0.0, 0.0, 0.0])  # sum H^T gn (object mass gradient, second derivative)
         gm = 0.0
         for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
             off = ti.Vector([i, j, k])
             I = base + off
             gg = ggrid[I[0], I[1], I[2]]
+            if obj:
+                gg = oggrid[I[0], I[1], I[2]]
             g = ti.Vector([gg[0], gg[1], gg[2]])
             wt = w[i][0] * w[j][1] * w[k][2]
-            dwt = ti.Vector([
-                dw[i][0] * w[j][1] * w[k][2],
-                w[i][0] * dw[j][1] * w[k][2],
-                w[i][0] * w[j][1] * dw[k][2],
-            ])
+            dwt = _dweights(w, dw, i, j, k)
             q = Ap @ ti.cast(off, float) - Afx
             gvv = g.dot(vp) + gg[3]
             sc += (m * gvv + dx * g.dot(q)) * dwt
@@ -116,7 +148,11 @@ def p2g_grad(
             sg += wg
             sgo += wg.outer_product(ti.cast(off, float))
             gm += wt * gvv
-        xg[s, p] = xg[s, p] + inv_dx * sc - Ap.transpose() @ sg
+            if obj:
+                gn = ngrid[I[0], I[1], I[2]]
+                gm += inv_dx * dwt.dot(gn)
+                sh += _hessian_vjp(w, dw, gn, i, j, k)
+        xg[s, p] = xg[s, p] + inv_dx * sc - Ap.transpose() @ sg + (m * inv_dx * inv_dx) * sh
         vg[s, p] = (m * damp[p]) * sg
         G = dx * (sgo - sg.outer_product(fx))  # d L / d A
         g_C, g_F, g_ph, g_e, g_a = _stress_vjp(Cp, Fp, e, a, d, ph, G, Fg[s + 1, p], dx, dt,
@@ -146,42 +182,120 @@ def _friction_vjp(v, nrm, mu_f, g):
     return out
 
 
+@ti.func
+def _boundary_vjp(I, vin, g, boxes: ti.template(), ground_y, mu_f, dims, dx, held):
+    """Vector-Jacobian product of :func:`~dbtool.sim.kernels._boundary` at ``vin``."""
+    pos = I * dx
+    v0, v1, v2, v3 = _colliders(pos, vin, boxes, ground_y, mu_f)
+    g = g * _wall_mask(I, v3, dims) * (1.0 - held)
+    g = _friction_vjp(v2, _box_normal(pos, boxes, 1), mu_f, g)
+    g = _friction_vjp(v1, _box_normal(pos, boxes, 0), mu_f, g)
+    if pos[1] <= ground_y:
+        g = _friction_vjp(v0, ti.Vector([0.0, 1.0, 0.0]), mu_f, g)
+    return g
+
+
+@ti.func
+def _contact_vjp(vr, mr, vo, mo, gm, mu_c, gr, go):
+    """Vector-Jacobian product of :func:`~dbtool.sim.kernels._contact` for the output
+    adjoints ``gr``, ``go``: the adjoints of ``vr``, ``mr``, ``vo``, ``mo`` and ``gm``."""
+    nrm, ln = _contact_normal(gm)
+    w = vo - vr
+    sn = w.dot(nrm)
+    total = mr + mo
+    a = mo / total
+    b = mr / total
+    gd = a * gr - b * go
+    d = ti.Vector([0.0, 0.0, 0.0])
+    gw = ti.Vector([0.0, 0.0, 0.0])
+    ggm = ti.Vector([0.0, 0.0, 0.0])
+    if ln > 0.0 and sn > 0.0:
+        wt = w - sn * nrm
+        lt = ti.sqrt(wt.dot(wt) + 1e-30)
+        if lt <= mu_c * sn:
+            d = w
+            gw = gd
+        else:
+            th = wt / lt
+            d = sn * nrm + (mu_c * sn) * th
+            q = (mu_c * sn / lt) * (gd - th * th.dot(gd))
+            cc = gd.dot(nrm) + mu_c * gd.dot(th) - q.dot(nrm)
+            gw = cc * nrm + q
+            gn = cc * w + sn * gd - sn * q
+            ggm = (gn - nrm * nrm.dot(gn)) / ln
+    ga = (gr + go).dot(d)
+    return gr - gw, ga * (-mo / (total * total)), go + gw, ga * (mr / (total * total)), ggm
+
+
+@ti.func
+def _update_vjp(vin, m, g, dt, gravity, damp):
+    """``(dL/d mv, dL/d m)`` of ``vin = c mv / m - dt g e_y`` for the ``vin`` adjoint ``g``:
+    ``dL/dmv = c g / m``, ``dL/dm = -g . (c mv / m) / m``."""
+    vm = vin + ti.Vector([0.0, dt * gravity, 0.0])
+    gd = g / m * damp
+    return ti.Vector([gd[0], gd[1], gd[2], -g.dot(vm) / m])
+
+
 @ti.kernel
 def grid_op_grad(
     gscratch: nd(), grid_m: nd(), grid_vin: nd(), ggrid: nd(), boxes: nd(), clamp: nd(),
+    ogscratch: nd(), grid_om: nd(), grid_ovin: nd(), grid_r0: nd(), grid_o0: nd(),
+    grid_gm: nd(), grid_og: nd(), oggrid: nd(), ngrid: nd(),
     s: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
     dx: float, dt: float, gravity: float, ground_y: float, mu_f: float, damp: float,
+    multi: ti.i32, mu_c: float,
 ):
-    """Adjoint of :func:`grid_op`: ``ggrid = (dL/d mv, dL/d m)`` from the g2p adjoints."""
+    """Adjoint of :func:`grid_op`: ``ggrid = (dL/d mv, dL/d m)`` from the g2p adjoints (and
+    with ``multi`` the object field's ``oggrid`` and the adjoint ``ngrid`` of its mass
+    gradient, through the contact)."""
     for i, j, k in ti.ndrange((lx, hx), (ly, hy), (lz, hz)):
         g = ti.Vector([0.0, 0.0, 0.0])
         for c in range(chunks):
             g += gscratch[c, i, j, k]
             gscratch[c, i, j, k] = ti.Vector([0.0, 0.0, 0.0])
         m = grid_m[s, i, j, k]
+        I = ti.Vector([i, j, k])
+        dims = ti.Vector([nx, ny, nz])
+        if m > 0.0:
+            g = _boundary_vjp(I, grid_vin[s, i, j, k], g, boxes, ground_y, mu_f, dims, dx,
+                              clamp[i, j, k])
+        vr = grid_vin[s, i, j, k]
+        gmr = 0.0
+        if multi != 0:
+            go = ti.Vector([0.0, 0.0, 0.0])
+            for c in range(chunks):
+                go += ogscratch[c, i, j, k]
+                ogscratch[c, i, j, k] = ti.Vector([0.0, 0.0, 0.0])
+            mo = grid_om[s, i, j, k]
+            if mo > 0.0:
+                go = _boundary_vjp(I, grid_ovin[s, i, j, k], go, boxes, grid_og[s, i, j, k],
+                                   mu_f, dims, dx, 0.0)
+            vr = grid_r0[s, i, j, k]
+            vo = grid_o0[s, i, j, k]
+            ggm = ti.Vector([0.0, 0.0, 0.0])
+            gmo = 0.0
+            if m > 0.0 and mo > 0.0:
+                g, gmr, go, gmo, ggm = _contact_vjp(vr, m, vo, mo, grid_gm[s, i, j, k], mu_c,
+                                                    g, go)
+            oout = ti.Vector([0.0, 0.0, 0.0, 0.0])
+            if mo > 0.0:
+                oout = _update_vjp(vo, mo, go, dt, gravity, damp)
+                oout[3] += gmo
+            oggrid[i, j, k] = oout
+            ngrid[i, j, k] = ggm
         out = ti.Vector([0.0, 0.0, 0.0, 0.0])
         if m > 0.0:
-            vin = grid_vin[s, i, j, k]
-            I = ti.Vector([i, j, k])
-            pos = I * dx
-            v0, v1, v2, v3 = _colliders(pos, vin, boxes, ground_y, mu_f)
-            g = g * _wall_mask(I, v3, ti.Vector([nx, ny, nz])) * (1.0 - clamp[i, j, k])
-            g = _friction_vjp(v2, _box_normal(pos, boxes, 1), mu_f, g)
-            g = _friction_vjp(v1, _box_normal(pos, boxes, 0), mu_f, g)
-            if pos[1] <= ground_y:
-                g = _friction_vjp(v0, ti.Vector([0.0, 1.0, 0.0]), mu_f, g)
-            # vin = c mv / m - dt g e_y  =>  dL/dmv = c g / m,  dL/dm = -g . (c mv / m) / m
-            vm = vin + ti.Vector([0.0, dt * gravity, 0.0])
-            gd = g / m * damp
-            out = ti.Vector([gd[0], gd[1], gd[2], -g.dot(vm) / m])
+            out = _update_vjp(vr, m, g, dt, gravity, damp)
+            out[3] += gmr
         ggrid[i, j, k] = out
 
 
 @ti.func
 def _g2p_grad_particle(
-    x: ti.template(), grid_v: ti.template(), glued: ti.template(), xg: ti.template(),
-    vg: ti.template(), Cg: ti.template(), gscratch: ti.template(), s, p, c, lo, hi, dx, dt,
+    x: ti.template(), grid_v: ti.template(), glued: ti.template(), field: ti.template(),
+    grid_ov: ti.template(), xg: ti.template(), vg: ti.template(), Cg: ti.template(),
+    gscratch: ti.template(), ogscratch: ti.template(), s, p, c, lo, hi, dx, dt, multi,
     atomic: ti.template(),
 ):
     inv_dx = 1.0 / dx
@@ -190,6 +304,7 @@ def _g2p_grad_particle(
     fx = xp * inv_dx - ti.cast(base, float)
     w, dw = _weights(fx)
     keep = 1.0 - glued[p]
+    obj = multi != 0 and field[p] > 0.0
     gx1 = xg[s + 1, p]
     gnv = keep * (vg[s + 1, p] + dt * gx1)
     gnC = keep * Cg[s + 1, p]
@@ -199,31 +314,31 @@ def _g2p_grad_particle(
         off = ti.Vector([i, j, k])
         I = base + off
         gv = grid_v[s, I[0], I[1], I[2]]
+        if obj:
+            gv = grid_ov[s, I[0], I[1], I[2]]
         wt = w[i][0] * w[j][1] * w[k][2]
-        dwt = ti.Vector([
-            dw[i][0] * w[j][1] * w[k][2],
-            w[i][0] * dw[j][1] * w[k][2],
-            w[i][0] * w[j][1] * dw[k][2],
-        ])
+        dwt = _dweights(w, dw, i, j, k)
         Cu = gnC @ (ti.cast(off, float) - fx)
         gfx += dwt * (gnv.dot(gv) + 4.0 * inv_dx * gv.dot(Cu))
         swg += wt * gv
         val = wt * (gnv + 4.0 * inv_dx * Cu)
-        if ti.static(atomic):
-            gscratch[c, I[0], I[1], I[2]] += val
+        if obj:
+            _scatter(ogscratch, c, I, val, atomic)
         else:
-            gscratch[c, I[0], I[1], I[2]] = gscratch[c, I[0], I[1], I[2]] + val
+            _scatter(gscratch, c, I, val, atomic)
     gfx -= (4.0 * inv_dx) * (gnC.transpose() @ swg)
     xg[s, p] = gx1 + inv_dx * gfx
 
 
 @ti.kernel
 def g2p_grad(
-    x: nd(), grid_v: nd(), glued: nd(), xg: nd(), vg: nd(), Cg: nd(), gscratch: nd(),
-    s: ti.i32, n: ti.i32, chunks: ti.i32,
-    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, dt: float,
+    x: nd(), grid_v: nd(), glued: nd(), field: nd(), grid_ov: nd(), xg: nd(), vg: nd(),
+    Cg: nd(), gscratch: nd(), ogscratch: nd(), s: ti.i32, n: ti.i32, chunks: ti.i32,
+    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float,
+    dt: float, multi: ti.i32,
 ):
-    """Adjoint of :func:`g2p`: particle adjoints at ``s`` and node velocity adjoints."""
+    """Adjoint of :func:`g2p`: particle adjoints at ``s`` and node velocity adjoints (an
+    object particle's into ``ogscratch`` with ``multi``)."""
     lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
     for q in range(chunks * SPREAD):
         if q % SPREAD != 0:
@@ -231,20 +346,19 @@ def g2p_grad(
         c = q // SPREAD
         a, b = _range(c, chunks, n)
         for p in range(a, b):
-            _g2p_grad_particle(x, grid_v, glued, xg, vg, Cg, gscratch, s, p, c, lo, hi, dx, dt,
-                               False)
+            _g2p_grad_particle(x, grid_v, glued, field, grid_ov, xg, vg, Cg, gscratch,
+                               ogscratch, s, p, c, lo, hi, dx, dt, multi, False)
 
 
 @ti.kernel
 def g2p_grad_atomic(
-    x: nd(), grid_v: nd(), glued: nd(), xg: nd(), vg: nd(), Cg: nd(), gscratch: nd(),
-    s: ti.i32, n: ti.i32,
-    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, dt: float,
+    x: nd(), grid_v: nd(), glued: nd(), field: nd(), grid_ov: nd(), xg: nd(), vg: nd(),
+    Cg: nd(), gscratch: nd(), ogscratch: nd(), s: ti.i32, n: ti.i32,
+    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float,
+    dt: float, multi: ti.i32,
 ):
     """Massively parallel variant of :func:`g2p_grad` (GPU): atomic adds into one copy."""
     lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
     for p in range(n):
-        _g2p_grad_particle(x, grid_v, glued, xg, vg, Cg, gscratch, s, p, 0, lo, hi, dx, dt,
-                           True)
-
-
+        _g2p_grad_particle(x, grid_v, glued, field, grid_ov, xg, vg, Cg, gscratch,
+                           ogscratch, s, p, 0, lo, hi, dx, dt, multi, True)

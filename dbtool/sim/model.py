@@ -20,7 +20,9 @@ class Scene:
     ``size`` is the domain extent (x, y = gravity axis, z), its origin at 0; ``boxes`` are static
     colliders ``(center, half_extent)``; the ground is the plane ``y = ground_y`` with Coulomb
     friction coefficient ``friction``; ``damping`` is a mass-proportional damping rate (0 for
-    every task).
+    every task). ``object_friction`` set gives the particles marked ``field`` 1 (a task's
+    object) their own grid velocity field, meeting the robot's through frictional contact
+    with that Coulomb coefficient; ``None`` keeps one shared field (MLS-MPM's usual coupling).
     """
 
     size: tuple[float, float, float]
@@ -32,6 +34,7 @@ class Scene:
     friction: float = 0.5
     gravity: float = 9.8
     damping: float = 0.0
+    object_friction: float | None = None
 
     def damp(self, dt: float) -> float:
         """Velocity factor per substep of the mass-proportional ``damping`` rate (1/time):
@@ -64,7 +67,9 @@ class Particles:
     ``phi`` is the effective occupancy (mass and stress scale with it; 0 = inactive tracer),
     ``E`` the Young's modulus, ``wact`` the weight of each of the ``MAX_GROUPS`` control
     channels, ``adir`` the unit actuator direction, ``glued`` 1 for clamped particles,
-    ``v0`` the initial velocity.
+    ``v0`` the initial velocity, ``damping`` a material damping rate, ``field`` 1 for the
+    particles of a task object (its own velocity field where the scene sets
+    ``object_friction``).
     """
 
     x0: np.ndarray
@@ -75,6 +80,7 @@ class Particles:
     glued: np.ndarray
     v0: np.ndarray
     damping: np.ndarray | None = None
+    field: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -86,7 +92,7 @@ class Particles:
             raise ValueError("the body is empty: no particles to simulate")
         shapes = {
             "x0": (n, 3), "phi": (n,), "E": (n,), "wact": (n, K.MAX_GROUPS),
-            "adir": (n, 3), "glued": (n,), "v0": (n, 3), "damping": (n,),
+            "adir": (n, 3), "glued": (n,), "v0": (n, 3), "damping": (n,), "field": (n,),
         }
         for name, shape in shapes.items():
             if getattr(self, name) is None:

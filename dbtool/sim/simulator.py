@@ -60,12 +60,14 @@ class Simulator:
         self.checkpoints = State.allocate(pool, dtype, n, n_steps + 1 if g else 1,
                                           x_slots=n_steps + 1)
         self.body = Body.allocate(pool, dtype, n, n_steps, g)
-        self.grid = Grid.allocate(pool, dtype, scene.grid, chunks, substeps)
+        self.multi = multi = scene.object_friction is not None and particles.field is not None \
+            and bool(np.any(np.asarray(particles.field) > 0))
+        self.grid = Grid.allocate(pool, dtype, scene.grid, chunks, substeps, multi)
         self.stepper = Stepper(scene, self.mat, self.state, self.body, self.grid, pool, dtype,
                                substeps, atomic, chunks)
         self.np_dtype = self.stepper.np_dtype
         self.adjoint = Adjoint.allocate(pool, dtype, self.state, self.body, scene.grid,
-                                        chunks) if g else None
+                                        chunks, multi) if g else None
         self._upload()
 
     # ----------------------------------------------------------------- arrays
@@ -89,6 +91,8 @@ class Simulator:
         b.glued.from_numpy(np.asarray(p.glued, f))
         rate = np.zeros(self.n) if p.damping is None else np.asarray(p.damping, float)
         b.damp.from_numpy(np.exp(-rate * self.mat.dt).astype(f))
+        if self.multi:
+            b.field.from_numpy((np.asarray(p.field) > 0).astype(f))
         if np.any(np.asarray(p.glued) > 0):
             self.grid.clamp.from_numpy(
                 clamp_nodes(p.x0, p.glued, self.scene.dx, self.scene.grid).astype(f))

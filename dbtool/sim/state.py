@@ -83,8 +83,9 @@ class State:
 class Body:
     """Per-particle fields (``wact``: weight of each of ``MAX_GROUPS`` control channels,
     ``adir``: unit muscle direction, ``glued``: 1 for clamped particles, ``damp``: momentum
-    factor per substep of the material damping), the per-control-step actuation ``act`` and
-    the muscle signal ``actp`` of the current control step."""
+    factor per substep of the material damping, ``field``: 1 for the particles of a task
+    object that has its own velocity field), the per-control-step actuation ``act`` and the
+    muscle signal ``actp`` of the current control step."""
 
     phi: object
     E: object
@@ -94,19 +95,22 @@ class Body:
     act: object
     actp: object
     damp: object
+    field: object
 
     @classmethod
     def allocate(cls, pool: ArrayPool, dtype, n: int, n_steps: int, grad: bool) -> Body:
         v3, _, _ = _types(dtype)
+        field = pool(dtype, (n,))
+        field.fill(0)
         return cls(pool(dtype, (n,), grad), pool(dtype, (n,), grad),
                    pool(dtype, (n, K.MAX_GROUPS), grad), pool(v3, (n,)), pool(dtype, (n,)),
                    pool(dtype, (n_steps, K.MAX_GROUPS), grad), pool(dtype, (n,), grad),
-                   pool(dtype, (n,)))
+                   pool(dtype, (n,)), field)
 
     @property
     def stress(self) -> tuple:
         """The fields the stress and p2g kernels read, in their order."""
-        return self.phi, self.E, self.actp, self.adir, self.damp
+        return self.phi, self.E, self.actp, self.adir, self.damp, self.field
 
 
 @dataclass
@@ -114,31 +118,73 @@ class Grid:
     """``scratch``: one p2g grid copy per chunk (mass-weighted momentum and mass); ``m``,
     ``vin`` (before the boundary conditions) and ``v`` of each substep of a control step;
     ``clamp``: 1 at the nodes held at rest by glued particles (:func:`~dbtool.sim.model.
-    clamp_nodes`)."""
+    clamp_nodes`).
+
+    With a separate object field (``multi``) the ``o*`` arrays are the object's copies,
+    ``nscratch`` its mass gradient and mass-weighted positions per chunk, ``xscratch`` the
+    robot's mass-weighted positions, and ``r0``, ``o0``, ``gm``, ``og`` keep the robot's and
+    the object's velocities before contact, the object's mass gradient and the object's
+    ground height per node (-1 for none) for the adjoint; otherwise they are single-node
+    placeholders the kernels never touch."""
 
     scratch: object
     m: object
     vin: object
     v: object
     clamp: object
+    oscratch: object
+    nscratch: object
+    xscratch: object
+    om: object
+    ovin: object
+    ov: object
+    r0: object
+    o0: object
+    gm: object
+    og: object
+    multi: int = 0
 
     @classmethod
     def allocate(cls, pool: ArrayPool, dtype, dims: tuple[int, ...], chunks: int,
-                 substeps: int) -> Grid:
+                 substeps: int, multi: bool = False) -> Grid:
         v3, _, v4 = _types(dtype)
+        v6 = ti.types.vector(6, dtype)
         scratch = pool(v4, (chunks, *dims))
         scratch.fill(0)
         shape = (substeps, *dims)
         clamp = pool(dtype, dims)
         clamp.fill(0)
-        return cls(scratch, pool(dtype, shape), pool(v3, shape), pool(v3, shape), clamp)
+        odims = dims if multi else (1, 1, 1)
+        oshape = shape if multi else (1, 1, 1, 1)
+        oscratch = pool(v4, (chunks, *odims))
+        nscratch = pool(v6, (chunks, *odims))
+        xscratch = pool(v3, (chunks, *odims))
+        for a in (oscratch, nscratch, xscratch):
+            a.fill(0)
+        return cls(scratch, pool(dtype, shape), pool(v3, shape), pool(v3, shape), clamp,
+                   oscratch, nscratch, xscratch, pool(dtype, oshape), pool(v3, oshape),
+                   pool(v3, oshape), pool(v3, oshape), pool(v3, oshape), pool(v3, oshape),
+                   pool(dtype, oshape), int(multi))
+
+    @property
+    def p2g(self) -> tuple:
+        """The grid copies p2g scatters into, in its order."""
+        return self.scratch, self.oscratch, self.nscratch, self.xscratch
+
+    @property
+    def objects(self) -> tuple:
+        """The object-field arrays of ``grid_op``, in its order."""
+        return (self.oscratch, self.nscratch, self.xscratch, self.om, self.ovin, self.ov,
+                self.r0, self.o0, self.gm, self.og)
 
 
 @dataclass
 class Adjoint:
     """Adjoints the hand-written kernels handle: of the substep state (``x``, ``v`` here;
     ``C``, ``F`` and the body fields are the Taichi ``.grad`` of the primal arrays), the g2p
-    grid copies ``scratch`` and the node adjoints ``grid = (dL/d mv, dL/d m)``."""
+    grid copies ``scratch`` and the node adjoints ``grid = (dL/d mv, dL/d m)``; ``oscratch``,
+    ``ogrid`` and ``ngrid`` (the object's mass gradient) are the object field's
+    (placeholders without one)."""
 
     x: object
     v: object
@@ -149,16 +195,23 @@ class Adjoint:
     actp: object
     scratch: object
     grid: object
+    oscratch: object
+    ogrid: object
+    ngrid: object
 
     @classmethod
     def allocate(cls, pool: ArrayPool, dtype, state: State, body: Body,
-                 dims: tuple[int, ...], chunks: int) -> Adjoint:
+                 dims: tuple[int, ...], chunks: int, multi: bool = False) -> Adjoint:
         v3, _, v4 = _types(dtype)
         slots, n = state.x.shape
         scratch = pool(v3, (chunks, *dims))
         scratch.fill(0)
+        odims = dims if multi else (1, 1, 1)
+        oscratch = pool(v3, (chunks, *odims))
+        oscratch.fill(0)
         return cls(pool(v3, (slots, n)), pool(v3, (slots, n)), state.C.grad, state.F.grad,
-                   body.phi.grad, body.E.grad, body.actp.grad, scratch, pool(v4, dims))
+                   body.phi.grad, body.E.grad, body.actp.grad, scratch, pool(v4, dims),
+                   oscratch, pool(v4, odims), pool(v3, odims))
 
     @property
     def state(self) -> State:

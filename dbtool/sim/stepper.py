@@ -95,15 +95,18 @@ class Stepper:
     def substep(self, s: int, r: Region, last: bool = False) -> None:
         """Substep ``s``: slot ``s`` of the state to slot ``s + 1`` (``last`` skips g2p)."""
         sc, m, st, g = self.scene, self.mat, self.state, self.grid
+        multi, mu_c = g.multi, self.scene.object_friction or 0.0
         if self.atomic:
-            K.p2g_atomic(*st, *self.body.stress, g.scratch, s, self.n, *r, *self.consts)
+            K.p2g_atomic(*st, *self.body.stress, *g.p2g, s, self.n, *r, *self.consts, multi)
         else:
-            K.p2g(*st, *self.body.stress, g.scratch, s, self.n, self.chunks, *r, *self.consts)
-        K.grid_op(g.scratch, g.m, g.vin, g.v, self.boxes, g.clamp, s, self.chunks, *self.dims,
-                  *r, sc.dx,
-                  m.dt, sc.gravity, sc.ground_y, sc.friction, sc.damp(m.dt))
+            K.p2g(*st, *self.body.stress, *g.p2g, s, self.n, self.chunks, *r, *self.consts,
+                  multi)
+        K.grid_op(g.scratch, g.m, g.vin, g.v, self.boxes, g.clamp, *g.objects, s, self.chunks,
+                  *self.dims, *r, sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction,
+                  sc.damp(m.dt), multi, mu_c)
         if not last:
-            K.g2p(st.x, st.v, st.C, g.v, self.body.glued, s, self.n, *r, sc.dx, m.dt)
+            K.g2p(st.x, st.v, st.C, g.v, self.body.glued, self.body.field, g.ov, s, self.n, *r,
+                  sc.dx, m.dt, multi)
 
     def segment(self, t: int, r: Region, replay: bool = False) -> None:
         """The substeps of control step ``t``. A backward ``replay`` skips the last g2p: its

@@ -144,6 +144,7 @@ class Task:
             glued=np.concatenate([p[5] for p in parts]), v0=v0,
             damping=np.where(np.arange(len(x0)) < n_robot, self.damping, 0.0) if self.damping
             else None,
+            field=(np.arange(len(x0)) >= n_robot).astype(float),
         )
         design_index = np.concatenate([p[6] for p in parts]).astype(int)
         robot_mask = np.zeros(len(x0), bool)

@@ -52,12 +52,16 @@ class Gripping(Task):
     def mirror_plane(self) -> tuple[int, float]:
         return 2, float(self.origin()[2] + FULL[2] / 2)
 
-    contact = ("shared grid (MLS-MPM single velocity field): no slip while finger and cube "
-               "press together, free separation; no friction coefficient to tune")
+    # Coulomb friction between finger and cube: the cube has its own grid velocity field and
+    # meets the fingers' through frictional contact (docs/method.md §3, "Contact").
+    object_friction = 1.0
+    contact = ("separate velocity fields for the fingers and the cube, joined where they press "
+               "together: no interpenetration, Coulomb friction, free separation")
 
     def describe(self) -> dict:
         return {**super().describe(), "cube_stiffness": self.object_stiffness,
-                "finger_cube_contact": self.contact, "finger_damping": self.damping,
+                "finger_cube_contact": self.contact,
+                "finger_cube_friction": self.object_friction, "finger_damping": self.damping,
                 "ground_friction": self.scene().friction}
 
     def design_workspace(self) -> tuple[float, float, float]:
@@ -67,7 +71,8 @@ class Gripping(Task):
         return lattice(self.design_workspace(), SPACING)
 
     def scene(self) -> Scene:
-        return Scene(size=(0.10, 0.13, 0.16), dx=DX, ground_y=GROUND)
+        return Scene(size=(0.10, 0.13, 0.16), dx=DX, ground_y=GROUND,
+                     object_friction=self.object_friction)
 
     def origin(self) -> np.ndarray:
         return np.array([0.02, GROUND + CUBE / 2, 0.02])
