@@ -247,12 +247,10 @@ def test_gradients_through_a_clamped_gripping_episode():
         assert rel < TOL, f"{name}: fd {fd} vs analytic {an} (rel {rel:.2e})"
 
 
-def test_gradients_through_frictional_contact_between_velocity_fields():
-    """Two bodies thrown into each other on the ground, the second one a task object with its
-    own velocity field (docs/method.md §3, "Contact"): gradients w.r.t. every particle field,
-    the actions and the initial state match central differences, and the contact and its
-    friction really shape the episode."""
-    rng = np.random.default_rng(2)
+def _two_fields(mu=0.5, rng=None):
+    """Two 8x8x8 bodies thrown into each other on the ground, the second one a task object
+    with its own velocity field; returns a particle factory, a scene factory and the actions."""
+    rng = rng if rng is not None else np.random.default_rng(2)
     side, sp = 8, 0.0025
     g = (np.stack(np.meshgrid(*[np.arange(side)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5)
     a = g * sp + np.array([0.03, 0.0151, 0.04])
@@ -271,12 +269,23 @@ def test_gradients_through_frictional_contact_between_velocity_fields():
                          adir=np.tile([0, 1.0, 0], (n, 1)), glued=np.zeros(n), v0=v0.copy(),
                          field=field)
 
-    def scene(mu=0.5) -> Scene:
+    def scene(mu=mu) -> Scene:
         return Scene(size=(0.12, 0.08, 0.1), object_friction=mu)
 
+    acts = 0.3 * np.sin(np.arange(STEPS)[:, None] * 0.7 + np.arange(2)[None])
+    return particles, scene, acts
+
+
+def test_gradients_through_frictional_contact_between_velocity_fields():
+    """Two bodies thrown into each other on the ground, the second one a task object with its
+    own velocity field (docs/method.md §3, "Contact"): gradients w.r.t. every particle field,
+    the actions and the initial state match central differences, and the contact and its
+    friction really shape the episode."""
+    rng = np.random.default_rng(2)
+    particles, scene, acts = _two_fields(rng=rng)
     sim = Simulator(scene(), particles(), n_steps=STEPS)
     assert sim.multi
-    acts = 0.3 * np.sin(np.arange(STEPS)[:, None] * 0.7 + np.arange(2)[None])
+    n = sim.n
     w = rng.normal(size=(n, 3))
 
     def loss(s: Simulator = sim) -> float:
@@ -318,3 +327,22 @@ def test_gradients_through_frictional_contact_between_velocity_fields():
     check("actions", lambda: acts, put_actions, 1e-5)
     check("x0", lambda: sim.p.x0, lambda a: setattr(sim.p, "x0", a), 1e-7)
     check("v0", lambda: sim.p.v0, lambda a: setattr(sim.p, "v0", a), 1e-5)
+
+
+def test_the_gpu_kernels_agree_with_the_cpu_ones():
+    """The atomic-add kernels a GPU runs (one grid copy) give the CPU kernels' episode and
+    gradients on the two-field contact scene, run here on the CPU."""
+    particles, scene, acts = _two_fields()
+    out = []
+    for atomic in (False, True):
+        sim = Simulator(scene(), particles(), n_steps=STEPS)
+        sim.stepper.atomic = atomic
+        sim.forward(acts)
+        x = sim.final_state()["x"]
+        grads = sim.backward(np.ones_like(x))
+        out.append((x, grads))
+        sim.release()
+    (xa, ga), (xb, gb) = out
+    np.testing.assert_allclose(xb, xa, rtol=0, atol=1e-12)
+    for k in ("phi", "E", "actions", "x0", "v0"):
+        np.testing.assert_allclose(gb[k], ga[k], rtol=1e-8, atol=1e-10 * np.abs(ga[k]).max())
