@@ -137,11 +137,12 @@ def test_channels_take_the_line_and_tube_sizes_and_round_their_bends(made):
 
 
 def test_a_wall_no_route_can_keep_is_reported_as_failing():
-    asm = build(Design.load(REFERENCE / "design.npz"), ExportConfig(min_wall=6.0, slice=False))
+    # the reference finger is thick: its best routes keep 8.1-9.1 mm walls (measured)
+    asm = build(Design.load(REFERENCE / "design.npz"), ExportConfig(min_wall=10.0, slice=False))
     assert not all(t.ok for t in asm.tendons)
     bad = [t for t in asm.tendons if not t.ok]
     assert all(any("wall" in f for f in t.failures) for t in bad)
-    assert all(t.clearance_mm < 6.0 for t in bad)
+    assert all(t.clearance_mm < 10.0 for t in bad)
 
 
 def test_the_assembly_sheet_lists_parts_steps_and_line_lengths(made):

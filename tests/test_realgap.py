@@ -21,9 +21,9 @@ from dbtool.realgap.run import open_bench, replay, simulate
 
 REF = Path(__file__).resolve().parents[1] / "exports" / "gripping-seed0"
 RETURN_TOL_MM = 0.5  # release back to 0 ends this close to the start (measured 0.28)
-# simulated rest vs the exported meshes' fingertips: measured 0.15 mm on the earlier reference
-# and 0.61 on the current one, whose tips are strands that the smoothed mesh thins (its lattice
-# tips, before any step, are 75.43 mm apart against 75.45 simulated at rest: the gap is meshing)
+# simulated rest vs the exported meshes' fingertips: measured 0.15 mm on the first reference,
+# 0.61 on the second, whose tips were strands that the smoothed mesh thinned, and 0.10 on the
+# current one (77.31 against 77.21 mm)
 REST_TOL_MM = 1.0
 # the calibration tests' protocol: pull the flexion tendon 5 mm and release it
 PULL_5MM = {"flexion": standard_schedule(5.0, 5.0)["flexion"]}
@@ -112,10 +112,10 @@ def test_calibration_recovers_a_hidden_gain(bench):
     assert cal.rmse_after_mm < 0.2 * cal.rmse_before_mm
 
 
-# On the earlier reference: 1.2e-3 (gain), 1.2e-3 (stiffness), 1.7e-4 (friction). On the current
-# one d loss / d stiffness scale is 56 times smaller than d loss / d gain, and the float32
-# central differences themselves do not settle: -0.00551, -0.00542, -0.00564, -0.00590 for
-# eps = 0.01, 0.02, 0.05, 0.1, against the adjoint's -0.00534 (gain: rel. err. 8e-4).
+# On the first reference: 1.2e-3 (gain), 1.2e-3 (stiffness), 1.7e-4 (friction). On the second,
+# d loss / d stiffness scale was 56 times smaller than d loss / d gain and its float32 central
+# differences did not settle (-0.00551 .. -0.00590 for eps = 0.01 .. 0.1, adjoint -0.00534).
+# On the current one: 2.4e-4 (gain), 5.3e-3 (stiffness, 12 times smaller), 3.2e-5 (friction).
 TOL = {"gain": 0.01, "stiffness_scale": 0.1, "friction_mm": 0.01}
 
 
