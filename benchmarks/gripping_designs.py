@@ -35,7 +35,7 @@ MM = 1000.0
 # Each run folder keeps its design's measurements in CACHE, reused while the design file and
 # CODE (bump it when the measurements or the simulator change) are the same.
 CACHE = "gripping-check.json"
-CODE = "contact-1"
+CODE = "contact-2"
 
 
 def root_sites(task, robot) -> int:
@@ -61,7 +61,8 @@ def held(task, robot, steps: int = 300) -> float:
 
 
 def grip(ro) -> dict:
-    """Metric, cube lift (mm, at the end and its peak while a finger touches the cube), closest
+    """Metric, cube lift (mm: its centre at the end and its peak while a finger touches the
+    cube; its underside at the end; how much taller it ends than it started), closest
     finger-cube approach (mm), whether the cube is held off the ground at the end (a finger
     within a grid cell of it and its underside more than 1 mm up), and how far from ``g`` the
     cube's acceleration strays while nothing touches it (``free_flight_error``: at steps when
@@ -85,7 +86,10 @@ def grip(ro) -> dict:
     dt = SUBSTEPS * ep.task.material.dt
     acc = (c[2:] - 2 * c[1:-1] + c[:-2]) / dt**2
     g = ep.scene.gravity
+    height = (hi[:, 1] - lo[:, 1]) * MM
     return {"metric": float(ro.metric), "lift_mm": float(lift[-1]),
+            "bottom_lift_mm": float((lo[-1, 1] - lo[0, 1]) * MM),
+            "stretch_mm": float(height[-1] - height[0]),
             "peak_touching_lift_mm": float(lift[touch].max()) if touch.any() else 0.0,
             "closest_mm": float(near.min()), "touches": bool(touch.any()),
             "closest_at_end_mm": float(near[-1]), "held_at_end": bool(touch[-1] and up[-1]),
@@ -145,14 +149,15 @@ def run_prior_best(run: Path) -> tuple[float | None, float | None]:
 
 def table(rows: list[dict]) -> str:
     """The rows as the markdown table of docs/results.md."""
-    out = ["| design | metric (cube lift, m) | peak lift while touched (mm) | held at the end | "
-           "root moved at rest (mm) | root sites | closest approach (mm) | best prior sample of "
-           "the run's epoch 0 |", "| --- | ---: | ---: | :---: | ---: | ---: | ---: | ---: |"]
+    out = ["| design | metric (cube lift, m) | underside lift at the end (mm) | cube taller by "
+           "(mm) | peak lift while touched (mm) | root moved at rest (mm) | root sites | "
+           "closest approach (mm) | best prior sample of the run's epoch 0 |",
+           "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for r in rows:
         p0 = r.get("prior_epoch0_best")
-        out.append(f"| {r['design']} | {r['metric']:.5f} | {r['peak_touching_lift_mm']:.2f} | "
-                   f"{'yes' if r['held_at_end'] else 'no'} | {r['root_mm']:.3f} | "
-                   f"{r['root_sites']} | {r['closest_mm']:.2f} | "
+        out.append(f"| {r['design']} | {r['metric']:.5f} | {r['bottom_lift_mm']:.2f} | "
+                   f"{r['stretch_mm']:.2f} | {r['peak_touching_lift_mm']:.2f} | "
+                   f"{r['root_mm']:.3f} | {r['root_sites']} | {r['closest_mm']:.2f} | "
                    f"{'—' if p0 is None else f'{p0:.5f}'} |")
     return "\n".join(out) + "\n"
 
