@@ -58,6 +58,34 @@ def test_task_metric_gradients_match_finite_differences(task_name):
         assert rel < TOL, f"{field}: fd {fd} vs analytic {an} (rel {rel:.2e})"
 
 
+def _check_every_field(label, sim, loss, grads, rng, acts):
+    """Directional derivatives of ``loss()`` along random directions against ``grads`` for
+    every particle field, the actions (``acts[0]``, which ``loss`` reads) and the initial
+    state, by central differences."""
+    def check(name, get, put, eps):
+        value = get().copy()
+        d = rng.normal(size=value.shape)
+        put(value + eps * d)
+        lp = loss()
+        put(value - eps * d)
+        lm = loss()
+        put(value)
+        fd = (lp - lm) / (2 * eps)
+        an = float((grads[name][..., : value.shape[-1]] * d).sum())
+        rel = abs(fd - an) / max(abs(fd), 1e-12)
+        print(f"{label} d/d{name}: fd={fd:.9e} analytic={an:.9e} rel.err={rel:.2e}")
+        # the loss moves far above round-off (measured: 3.5e-9 for E .. 5.9e-6 for x0)
+        assert abs(lp - lm) > 1e-10, f"{name}: the loss does not depend on it (fd {fd})"
+        assert rel < TOL, f"{name}: fd {fd} vs analytic {an} (rel {rel:.2e})"
+
+    check("phi", lambda: sim.p.phi, lambda a: sim.set_particle_fields(phi=a), 1e-5)
+    check("E", lambda: sim.p.E, lambda a: sim.set_particle_fields(E=a), 1e-1)
+    check("wact", lambda: sim.p.wact, lambda a: sim.set_particle_fields(wact=a), 1e-5)
+    check("actions", lambda: acts[0], lambda a: acts.__setitem__(0, a), 1e-5)
+    check("x0", lambda: sim.p.x0, lambda a: setattr(sim.p, "x0", a), 1e-7)
+    check("v0", lambda: sim.p.v0, lambda a: setattr(sim.p, "v0", a), 1e-5)
+
+
 def test_gradients_through_colliders_friction_and_initial_state():
     """Low-level check: a body thrown against a box collider and the ground with friction;
     gradients w.r.t. every particle field, the actions and the initial state match central
@@ -81,11 +109,11 @@ def test_gradients_through_colliders_friction_and_initial_state():
     box = ((0.084, 0.03, 0.07), (0.01, 0.015, 0.03))  # 4 mm right of the body
     scene = Scene(size=(0.15, 0.1, 0.1), boxes=[box])
     sim = Simulator(scene, particles(), n_steps=STEPS)
-    acts = 0.3 * np.sin(np.arange(STEPS)[:, None] * 0.7 + np.arange(2)[None])
+    acts = [0.3 * np.sin(np.arange(STEPS)[:, None] * 0.7 + np.arange(2)[None])]
     w = rng.normal(size=(n, 3))
 
     def loss(s: Simulator = sim) -> float:
-        s.forward(acts)
+        s.forward(acts[0])
         return float((s.final_state()["x"] * w).sum())
 
     base = loss()
@@ -99,32 +127,7 @@ def test_gradients_through_colliders_friction_and_initial_state():
         print(f"without the {label}: loss changes by {change:.3e}")
         assert change > 1e-4, f"the {label} does not touch the body"
 
-    def check(name, get, put, eps):
-        value = get().copy()
-        d = rng.normal(size=value.shape)
-        put(value + eps * d)
-        lp = loss()
-        put(value - eps * d)
-        lm = loss()
-        put(value)
-        fd = (lp - lm) / (2 * eps)
-        an = float((grads[name][..., : value.shape[-1]] * d).sum())
-        rel = abs(fd - an) / max(abs(fd), 1e-12)
-        print(f"raw d/d{name}: fd={fd:.9e} analytic={an:.9e} rel.err={rel:.2e}")
-        # the loss moves far above round-off (measured: 3.5e-9 for E .. 5.9e-6 for x0)
-        assert abs(lp - lm) > 1e-10, f"{name}: the loss does not depend on it (fd {fd})"
-        assert rel < TOL, f"{name}: fd {fd} vs analytic {an} (rel {rel:.2e})"
-
-    def put_actions(a):
-        nonlocal acts
-        acts = a
-
-    check("phi", lambda: sim.p.phi, lambda a: sim.set_particle_fields(phi=a), 1e-5)
-    check("E", lambda: sim.p.E, lambda a: sim.set_particle_fields(E=a), 1e-1)
-    check("wact", lambda: sim.p.wact, lambda a: sim.set_particle_fields(wact=a), 1e-5)
-    check("actions", lambda: acts, put_actions, 1e-5)
-    check("x0", lambda: sim.p.x0, lambda a: setattr(sim.p, "x0", a), 1e-7)
-    check("v0", lambda: sim.p.v0, lambda a: setattr(sim.p, "v0", a), 1e-5)
+    _check_every_field("raw", sim, loss, grads, rng, acts)
 
 
 def test_gradient_episodes_are_bit_reproducible():
@@ -282,14 +285,15 @@ def test_gradients_through_frictional_contact_between_velocity_fields():
     the actions and the initial state match central differences, and the contact and its
     friction really shape the episode."""
     rng = np.random.default_rng(2)
-    particles, scene, acts = _two_fields(rng=rng)
+    particles, scene, a0 = _two_fields(rng=rng)
+    acts = [a0]
     sim = Simulator(scene(), particles(), n_steps=STEPS)
     assert sim.multi
     n = sim.n
     w = rng.normal(size=(n, 3))
 
     def loss(s: Simulator = sim) -> float:
-        s.forward(acts)
+        s.forward(acts[0])
         return float((s.final_state()["x"] * w).sum())
 
     base = loss()
@@ -302,31 +306,7 @@ def test_gradients_through_frictional_contact_between_velocity_fields():
         print(f"without {label}: loss changes by {change:.3e}")
         assert change > 1e-4, f"{label} does not shape the episode"
 
-    def check(name, get, put, eps):
-        value = get().copy()
-        d = rng.normal(size=value.shape)
-        put(value + eps * d)
-        lp = loss()
-        put(value - eps * d)
-        lm = loss()
-        put(value)
-        fd = (lp - lm) / (2 * eps)
-        an = float((grads[name][..., : value.shape[-1]] * d).sum())
-        rel = abs(fd - an) / max(abs(fd), 1e-12)
-        print(f"contact d/d{name}: fd={fd:.9e} analytic={an:.9e} rel.err={rel:.2e}")
-        assert abs(lp - lm) > 1e-10, f"{name}: the loss does not depend on it (fd {fd})"
-        assert rel < TOL, f"{name}: fd {fd} vs analytic {an} (rel {rel:.2e})"
-
-    def put_actions(a):
-        nonlocal acts
-        acts = a
-
-    check("phi", lambda: sim.p.phi, lambda a: sim.set_particle_fields(phi=a), 1e-5)
-    check("E", lambda: sim.p.E, lambda a: sim.set_particle_fields(E=a), 1e-1)
-    check("wact", lambda: sim.p.wact, lambda a: sim.set_particle_fields(wact=a), 1e-5)
-    check("actions", lambda: acts, put_actions, 1e-5)
-    check("x0", lambda: sim.p.x0, lambda a: setattr(sim.p, "x0", a), 1e-7)
-    check("v0", lambda: sim.p.v0, lambda a: setattr(sim.p, "v0", a), 1e-5)
+    _check_every_field("contact", sim, loss, grads, rng, acts)
 
 
 def test_the_gpu_kernels_agree_with_the_cpu_ones():
