@@ -9,18 +9,15 @@ the order of :mod:`dbtool.sim.kernels`, with the adjoint arrays of
 
 import taichi as ti
 
+from dbtool.sim.boundaries import _box_normal, _colliders, _contact_normal, _wall_mask
 from dbtool.sim.kernels import (
     SPREAD,
     _base,
-    _box_normal,
-    _colliders,
-    _contact_normal,
     _dweights,
     _moduli,
     _range,
     _scatter,
     _tau_unit,
-    _wall_mask,
     _weights,
     nd,
 )
@@ -184,7 +181,7 @@ def _friction_vjp(v, nrm, mu_f, g):
 
 @ti.func
 def _boundary_vjp(I, vin, g, boxes: ti.template(), ground_y, mu_f, dims, dx, held):
-    """Vector-Jacobian product of :func:`~dbtool.sim.kernels._boundary` at ``vin``."""
+    """Vector-Jacobian product of :func:`~dbtool.sim.boundaries._boundary` at ``vin``."""
     pos = I * dx
     v0, v1, v2, v3 = _colliders(pos, vin, boxes, ground_y, mu_f)
     g = g * _wall_mask(I, v3, dims) * (1.0 - held)
@@ -197,7 +194,7 @@ def _boundary_vjp(I, vin, g, boxes: ti.template(), ground_y, mu_f, dims, dx, hel
 
 @ti.func
 def _contact_vjp(vr, mr, vo, mo, gm, mu_c, gr, go):
-    """Vector-Jacobian product of :func:`~dbtool.sim.kernels._contact` for the output
+    """Vector-Jacobian product of :func:`~dbtool.sim.boundaries._contact` for the output
     adjoints ``gr``, ``go``: the adjoints of ``vr``, ``mr``, ``vo``, ``mo`` and ``gm``."""
     nrm, ln = _contact_normal(gm)
     w = vo - vr

@@ -17,6 +17,7 @@ import numpy as np
 from dbtool.sim import kernels as K
 from dbtool.sim import runtime
 from dbtool.sim.backward import backward
+from dbtool.sim.boundaries import BOUND
 from dbtool.sim.model import SUBSTEPS, Material, Particles, Scene, clamp_nodes
 from dbtool.sim.state import Adjoint, ArrayPool, Body, Grid, State
 from dbtool.sim.stepper import Region, SimulationError, Stepper
@@ -50,8 +51,8 @@ class Simulator:
         chunks = 1 if atomic else max(1, runtime.threads())
         lo = np.asarray(particles.x0).min(0)
         hi = np.asarray(particles.x0).max(0)
-        if np.any(lo < K.BOUND * scene.dx) or np.any(hi > np.array(scene.size)
-                                                              - K.BOUND * scene.dx):
+        if np.any(lo < BOUND * scene.dx) or np.any(hi > np.array(scene.size)
+                                                              - BOUND * scene.dx):
             raise ValueError("particles start outside the simulation domain (or in its walls)")
         self.regions: list[Region] = []
         self.pool = pool = ArrayPool()

@@ -16,6 +16,7 @@ import numpy as np
 import taichi as ti
 
 from dbtool.sim import kernels as K
+from dbtool.sim.boundaries import MAX_BOXES
 from dbtool.sim.model import Material, Scene
 from dbtool.sim.state import ArrayPool, Body, Constants, Grid, State
 
@@ -59,12 +60,12 @@ class Stepper:
         p_vol = (scene.dx * 0.5) ** 3
         self.consts = Constants(scene.dx, material.dt, p_vol, material.density, material.nu,
                                 material.act_strength)
-        self.boxes = pool(dtype, (K.MAX_BOXES, 6))
+        self.boxes = pool(dtype, (MAX_BOXES, 6))
         self.bbox = pool(dtype, (2, 3))
         self.stats = pool(dtype, (2,))
-        if len(scene.boxes) > K.MAX_BOXES:
-            raise ValueError(f"at most {K.MAX_BOXES} box colliders per scene")
-        boxes = np.zeros((K.MAX_BOXES, 6), self.np_dtype)
+        if len(scene.boxes) > MAX_BOXES:
+            raise ValueError(f"at most {MAX_BOXES} box colliders per scene")
+        boxes = np.zeros((MAX_BOXES, 6), self.np_dtype)
         for b, (c, h) in enumerate(scene.boxes):
             boxes[b] = (*c, *h)
         self.boxes.from_numpy(boxes)

@@ -8,7 +8,8 @@ import numpy as np
 import torch
 
 from dbtool.sim.bodies import attached, lattice
-from dbtool.sim.kernels import BOUND, MAX_GROUPS
+from dbtool.sim.boundaries import BOUND
+from dbtool.sim.kernels import MAX_GROUPS
 from dbtool.sim.robot import Robot
 from dbtool.sim.simulator import SUBSTEPS, Material, Particles, Scene  # noqa: F401 (re-exported)
 
