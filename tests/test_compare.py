@@ -17,13 +17,14 @@ import time
 from pathlib import Path
 
 import pytest
+import torch
 from cli_inprocess import run_cli
 
 from dbtool.cli_compare import expand_list_options
 from dbtool.compare.budget import BUDGETS, GRAD_COST, get_budget, gradient_iterations, used
 from dbtool.compare.methods import GRADIENT, METHODS, TITLES, diffusebot_configs, diffusebot_plan
 from dbtool.design import Design
-from dbtool.sim.tasks import TASKS
+from dbtool.sim.tasks import TASKS, get_task
 
 CLI = [sys.executable, "-c", "from dbtool.cli import main; main()", "compare"]
 NO_RAY = [sys.executable, "-c", "import sys; sys.modules['ray'] = None; "
@@ -141,6 +142,40 @@ def test_local_executor_gives_the_serial_numbers(serial_run, tmp_path):
     assert _same(rows) == {k: serial[k] for k in (("particle", "crawling", "0"),
                                                   ("prior", "crawling", "0"))}
     assert "2 cells done, 0 failed, 0 already finished" in res.stdout
+
+
+def test_a_method_that_does_not_read_the_seed_runs_once_per_task(serial_run, tmp_path):
+    """particle and voxel start from the reference body and descend deterministically: their
+    cells at other seeds are copies of one run, marked as such, and a run of seed 1 on its own
+    gives seed 0's numbers (what makes the copy true)."""
+    from dbtool.baselines.registry import make
+    from dbtool.compare.methods import seeded
+
+    assert [m for m in METHODS if not seeded(m)] == ["particle", "voxel"]
+    task = get_task("crawling")
+    for m in GRADIENT:
+        a, b = make(m, task, seed=0), make(m, task, seed=3)
+        same = all(torch.equal(p, q) for p, q in zip(a.parameters(), b.parameters(), strict=True))
+        assert same == (not seeded(m)), m
+    out = tmp_path / "seeds"
+    res = _compare("--budget", "smoke", "--tasks", "crawling", "--methods", "particle",
+                   "--seeds", "0", "1", "2", "--out", str(out))
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "3 cells, 0 finished, 1 to run on serial, 2 to copy" in res.stdout
+    rows = _rows(out)
+    assert len({tuple(v[3:]) for v in _same(rows).values()}) == 1
+    assert [r["worker"] for r in rows[1:]] == ["copy of particle-crawling-s0"] * 2
+    rec = json.loads((_cell(out, "particle", "crawling", 2) / "cell.json").read_text())
+    assert rec["seed"] == 2 and rec["copied_from"] == "particle-crawling-s0"
+    for name in CELL_FILES:
+        assert (_cell(out, "particle", "crawling", 2) / name).stat().st_size > 0
+    alone = tmp_path / "alone"
+    res = _compare("--budget", "smoke", "--tasks", "crawling", "--methods", "particle",
+                   "--seeds", "1", "--out", str(alone))
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert _same(_rows(alone)) == {k: v for k, v in _same(rows).items() if k[2] == "1"}
+    assert _rows(alone)[0]["metric"] == _same(_rows(serial_run[0]))[
+        ("particle", "crawling", "0")][4]
 
 
 def test_resume_after_a_kill_skips_the_finished_cell(serial_run, tmp_path):

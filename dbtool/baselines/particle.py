@@ -32,6 +32,7 @@ class ParticleRepresentation(Representation):
     """One occupancy, one softness and G actuator logits per design particle."""
 
     name = "particle"
+    seeded = False
     design_lr = DESIGN_LR
     init_text = ("The task's reference body: occupancy logit +2 inside and -2 outside, softness "
                  "0 (stiffness E0), actuator logits 4 on the particle's reference group and 0 "

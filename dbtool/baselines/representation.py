@@ -43,6 +43,9 @@ class Representation:
     name = ""
     design_lr = 0.01
     init_text = ""  # the documented initialisation, one sentence
+    # False where neither the initialisation nor the optimisation reads the seed: every seed
+    # then gives the same design, and a comparison runs the method once per task
+    seeded = True
 
     def __init__(self, task: Task, seed: int = 0, points: np.ndarray | None = None) -> None:
         self.task = task

@@ -68,6 +68,7 @@ class VoxelRepresentation(Representation):
     """Logits on a 16^3 voxel grid; each particle reads the trilinear blend of its 8 voxels."""
 
     name = "voxel"
+    seeded = False
     design_lr = 0.01
     init_text = ("The task's reference body: occupancy logits fitted by damped least squares so "
                  "that the interpolated logit at the particles is +2 inside and -2 outside "

@@ -7,13 +7,17 @@
         cell.json       status, metric, budget used, wall time, worker, commit (written last)
 
 A cell counts as finished only once ``cell.json`` says ``done``; anything else is run again on
-``--resume``. :func:`run_cell` is what every executor calls, in whatever process it runs.
+``--resume``. :func:`run_cell` is what every executor calls, in whatever process it runs. A
+method that does not read the seed (:func:`dbtool.compare.methods.seeded`) runs once per task;
+its other seeds' cells are copies of that one (:func:`copy_cell`, ``copied_from`` in their
+record).
 """
 
 from __future__ import annotations
 
 import json
 import os
+import shutil
 import socket
 import time
 import traceback
@@ -128,3 +132,22 @@ def _work(spec: CellSpec, log) -> dict:
     montage(ro.episode, ro.positions, spec.folder / "montage.png",
             title=f"{spec.method} / {task.title}: metric {ro.metric:.4g}")
     return {"metric": float(ro.metric), "info": out.info or {}}
+
+
+def copy_cell(source: CellSpec, spec: CellSpec) -> dict:
+    """Fill ``spec``'s folder with the finished cell ``source`` of the same method and task at
+    another seed (for a method whose design does not depend on the seed); the record keeps
+    the units the method spent and names its source in ``copied_from``, with no wall time."""
+    record = read_cell(source.folder)
+    if record is None or record.get("status") != "done":
+        raise ValueError(f"cell {source.name} is not finished: nothing to copy")
+    folder = spec.folder
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / CELL_FILE).unlink(missing_ok=True)
+    for name in ("metrics.jsonl", "design.npz", "montage.png"):
+        if (source.folder / name).exists():
+            shutil.copyfile(source.folder / name, folder / name)
+    record = {**record, **asdict(spec), "copied_from": source.name, "wall_s": 0.0,
+              "worker": f"copy of {source.name}"}
+    atomic_write_text(folder / CELL_FILE, json.dumps(record, indent=2, default=float))
+    return record

@@ -52,6 +52,17 @@ class Outcome:
     info: dict | None = None
 
 
+def seeded(method: str) -> bool:
+    """Whether ``method``'s design depends on the seed: false for the gradient baselines that
+    start from the task's reference body without a perturbation (particle, voxel), whose
+    gradient loop is deterministic."""
+    if method in GRADIENT:
+        from dbtool.baselines.registry import REPRESENTATIONS
+
+        return REPRESENTATIONS[method].seeded
+    return True
+
+
 def run_method(method: str, task: Task, budget: Budget, seed: int,
                log: Callable[..., None]) -> Outcome:
     """Spend ``budget`` (less the final evaluation) on ``method``; ``log(**row)`` records

@@ -8,7 +8,8 @@
 
 A new comparison refuses a folder that holds anything. ``--resume`` skips finished cells, runs
 failed and missing ones again and may add cells (more tasks, methods or seeds) on the same
-budget.
+budget. A method that does not read the seed runs once per task; its other seeds' cells copy
+that one (:func:`dbtool.compare.cells.copy_cell`).
 """
 
 from __future__ import annotations
@@ -23,9 +24,9 @@ from pathlib import Path
 
 from dbtool.atomic import atomic_write_text
 from dbtool.compare.budget import get_budget
-from dbtool.compare.cells import CellSpec, read_cell
+from dbtool.compare.cells import CellSpec, copy_cell, read_cell
 from dbtool.compare.executors import check_executor, execute
-from dbtool.compare.methods import METHODS
+from dbtool.compare.methods import METHODS, seeded
 from dbtool.sim.tasks import TASKS
 
 FORMAT = "dbtool.compare/1"
@@ -167,26 +168,53 @@ def compare(cfg: CompareConfig, out: str | Path, executor: str = "serial", worke
     out = Path(out)
     meta = prepare(out, cfg, resume)
     tag = commit_tag()
-    todo, skipped = [], 0
-    for m, t, s in meta["cells"]:
-        spec = CellSpec(m, t, s, meta["budget"], str(out.resolve()), meta["threads"],
-                        meta.get("arch", "cpu"), tag)
-        rec = read_cell(spec.folder)
-        if rec is not None and rec.get("status") == "done":
-            skipped += 1
+    specs = [CellSpec(m, t, s, meta["budget"], str(out.resolve()), meta["threads"],
+                      meta.get("arch", "cpu"), tag) for m, t, s in meta["cells"]]
+    finished = {sp.name for sp in specs
+                if (read_cell(sp.folder) or {}).get("status") == "done"}
+    source: dict[tuple[str, str], CellSpec] = {}  # the cell a seedless method's others copy
+    for sp in specs:
+        if not seeded(sp.method) and sp.name in finished:
+            source.setdefault((sp.method, sp.task), sp)
+    todo, copies = [], []
+    for sp in specs:
+        if sp.name in finished:
+            continue
+        if seeded(sp.method):
+            todo.append(sp)
+        elif (sp.method, sp.task) in source:
+            copies.append(sp)
         else:
-            todo.append(spec)
+            source[sp.method, sp.task] = sp
+            todo.append(sp)
+    skipped = len(finished)
+    copied = (f", {len(copies)} to copy from the same method's cell at another seed (the "
+              "method does not read the seed)") if copies else ""
     echo(f"comparison {out}: {len(meta['cells'])} cells, {skipped} finished, {len(todo)} to "
-         f"run on {executor} (budget {meta['budget']})")
+         f"run on {executor}{copied} (budget {meta['budget']})")
     done = failed = 0
-    for k, rec in enumerate(execute(todo, executor, workers, address), 1):
+
+    def report(k: int, n: int, rec: dict) -> None:
+        nonlocal done, failed
         ok = rec.get("status") == "done"
         done, failed = done + ok, failed + (not ok)
         what = (f"metric {rec['metric']:.4g}" if ok else f"FAILED: {rec.get('error')}")
-        echo(f"[{k}/{len(todo)}] {rec['method']} {rec['task']} seed {rec['seed']}: {what} "
+        echo(f"[{k}/{n}] {rec['method']} {rec['task']} seed {rec['seed']}: {what} "
              f"({rec.get('wall_s', '?')} s, {rec.get('budget_used', '?')} units, "
              f"{rec.get('worker')})")
         write_results(out, meta)
+
+    for k, rec in enumerate(execute(todo, executor, workers, address), 1):
+        report(k, len(todo), rec)
+    rerun = []
+    for sp in copies:
+        src = source[sp.method, sp.task]
+        if (read_cell(src.folder) or {}).get("status") == "done":
+            report(0, 0, copy_cell(src, sp))
+        else:
+            rerun.append(sp)  # the source failed: each seed runs on its own
+    for k, rec in enumerate(execute(rerun, executor, workers, address), 1):
+        report(k, len(rerun), rec)
     rows = write_results(out, meta)
     from dbtool.compare.report import write_report
 
