@@ -106,9 +106,40 @@ def zero_gradient_stops(run: Path) -> tuple[int, int]:
     return len(g), sum(1 for v in g if v == 0)
 
 
+CONTACT_MM = 0.5  # a finger particle this close to the cube's particle box presses on it
+
+
+def contact(ro) -> np.ndarray:
+    """Per step: is a finger particle within ``CONTACT_MM`` of the cube's box (particle
+    centres: touching surfaces sit about one particle spacing, 2.5 mm, apart)?"""
+    ep, P = ro.episode, ro.positions
+    fingers = (ep.info["finger"] > 0) & (ep.particles.phi > 0)
+    lo, hi = P[:, ep.object_mask].min(1), P[:, ep.object_mask].max(1)
+    gap = np.maximum(np.maximum(lo[:, None] - P[:, fingers], P[:, fingers] - hi[:, None]), 0)
+    return np.linalg.norm(gap, axis=2).min(1) * MM <= CONTACT_MM
+
+
+def lift_steps(ro) -> list[int]:
+    """Frames of the grip: the start, the approach, the first and last step of the contact in
+    which the cube stands highest, its middle, and two frames after the release."""
+    t = contact(ro)
+    c = ro.positions[:, ro.episode.object_mask, 1].mean(1)
+    if not t.any():
+        return [0, 25, 50, 75, len(c) - 1]
+    peak = int(np.flatnonzero(t)[np.argmax(c[t])])
+    first = last = peak
+    while first > 0 and t[first - 1]:
+        first -= 1
+    while last < len(c) - 1 and t[last + 1]:
+        last += 1
+    end = len(c) - 1
+    return sorted({0, max(0, first - 8), first, (first + last) // 2, last, (last + end) // 2, end})
+
+
 def side_view(ro, path: Path, steps=(0, 25, 50, 75, 100)) -> None:
     """A rollout seen along x (the fingers close along z): base, fingers and cube at
-    ``steps``, mm at the export's scale, the cube's lift in each panel's title."""
+    ``steps``, mm at the export's scale, the cube's lift in each panel's title and whether a
+    finger presses on it (:func:`contact`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -122,10 +153,13 @@ def side_view(ro, path: Path, steps=(0, 25, 50, 75, 100)) -> None:
              (cube, "0.45", "cube")]
     fig, axes = plt.subplots(1, len(steps), figsize=(3 * len(steps), 3.4), sharey=True)
     c0 = P[0, cube, 1].mean()
+    pressed = contact(ro)
     for ax, k in zip(axes, steps, strict=True):
         for m, col, _ in parts:
             ax.scatter(P[k, m, 2] * MM, P[k, m, 1] * MM, s=1, c=col, linewidths=0)
-        ax.set_title(f"step {k}: cube {(P[k, cube, 1].mean() - c0) * MM:+.1f} mm", fontsize=9)
+        touch = " (contact)" if pressed[k] else ""
+        ax.set_title(f"step {k}: cube {(P[k, cube, 1].mean() - c0) * MM:+.1f} mm{touch}",
+                     fontsize=9)
         ax.set_aspect("equal")
         ax.set_xlabel("z (mm)")
     axes[0].set_ylabel("y (mm)")
@@ -169,6 +203,9 @@ def main() -> None:
                     "default result) here; with no runs, only that")
     ap.add_argument("--out", type=Path)
     ap.add_argument("--figures", type=Path, help="write each design's side view here")
+    ap.add_argument("--lift", type=Path, help="with --figures: also draw this run's grip, "
+                    "from the fingers' first touch to the cube's highest touching lift "
+                    "(NAME-lift.png)")
     a = ap.parse_args()
     if not a.runs:
         if not a.table:
@@ -189,6 +226,10 @@ def main() -> None:
     for run in sorted(a.runs):
         if not (run / "design.npz").is_file():
             continue
+        if a.lift and a.figures and run.resolve() == a.lift.resolve():
+            d = Design.load(run / "design.npz")
+            ro = simulate(task, d.robot.compact(), d.controller)
+            side_view(ro, a.figures / f"{run.name}-lift.png", lift_steps(ro))
         m0, mall = run_prior_best(run)
         name = run.name if m0 is not None else str(run)
         stops, zero = zero_gradient_stops(run)
