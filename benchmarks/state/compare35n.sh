@@ -5,5 +5,5 @@ cd /work/main
 export DBTOOL_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 TI_LOG_LEVEL=warn
 while pgrep -f "q.sh" > /dev/null; do sleep 30; done
 d=~/.cache/dbtool/compare35n
-if [ -d $d ]; then r=--resume; else r=--no-resume; fi
+if [ -f $d/compare.json ]; then r=--resume; else r=--no-resume; fi
 dbtool compare --budget quick --tasks gripping --methods all --seeds 0 1 2 3 4 5 6 7 --executor local --workers 2 --threads 1 --out $d $r
