@@ -106,12 +106,12 @@ def zero_gradient_stops(run: Path) -> tuple[int, int]:
     return len(g), sum(1 for v in g if v == 0)
 
 
-CONTACT_MM = 0.5  # a finger particle this close to the cube's particle box presses on it
+CONTACT_MM = 2.5  # one particle spacing: particle centres this close, the surfaces meet
 
 
 def contact(ro) -> np.ndarray:
-    """Per step: is a finger particle within ``CONTACT_MM`` of the cube's box (particle
-    centres: touching surfaces sit about one particle spacing, 2.5 mm, apart)?"""
+    """Per step: is a finger particle's centre within ``CONTACT_MM`` of the box of the cube's
+    particle centres (each particle fills a 2.5 mm cell, so the two surfaces meet)?"""
     ep, P = ro.episode, ro.positions
     fingers = (ep.info["finger"] > 0) & (ep.particles.phi > 0)
     lo, hi = P[:, ep.object_mask].min(1), P[:, ep.object_mask].max(1)
