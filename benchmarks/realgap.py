@@ -6,8 +6,9 @@
 * ``illustrative``: the shipped illustrative log (hysteresis, a fast release, noise), fitted
   for gain, stiffness scale and channel friction: RMSE before and after.
 
-Each finished case is kept in ``benchmarks/results/realgap.json`` under its config, so an
-interrupted run continues with the next case. Prints a markdown table.
+Each finished case is kept in ``benchmarks/results/realgap.json`` under its config and the
+hash of the reference design it ran on, so an interrupted run continues with the next case and
+a regenerated reference export is measured again. Prints a markdown table.
 
     python benchmarks/realgap.py [--cases hidden-a hidden-b illustrative] [--max-evals 20]
 """
@@ -15,6 +16,7 @@ interrupted run continues with the next case. Prints a markdown table.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import sys
 import time
@@ -43,6 +45,10 @@ CASES = {
 }
 
 
+def design_hash() -> str:
+    return hashlib.sha256((REF / "design.npz").read_bytes()).hexdigest()
+
+
 def run_case(name: str, spec: dict, max_evals: int) -> dict:
     bench, meta = open_bench(REF)
     if "hidden" in spec:
@@ -58,7 +64,8 @@ def run_case(name: str, spec: dict, max_evals: int) -> dict:
               f"[{time.perf_counter() - t0:.0f} s]", flush=True)
 
     cal = calibrate(bench, log, TendonParams(), tuple(spec["fit"]), max_evals, progress=show)
-    out = {"case": name, **spec, "fitted": asdict(cal.params), "stderr": cal.stderr,
+    out = {"case": name, **spec, "design_sha256": design_hash(), "fitted": asdict(cal.params),
+           "stderr": cal.stderr,
            "rmse_before_mm": cal.rmse_before_mm, "rmse_after_mm": cal.rmse_after_mm,
            "rmse_drop": 1.0 - cal.rmse_after_mm / cal.rmse_before_mm,
            "evaluations": cal.evaluations, "wall_s": cal.wall_s, "hold": cal.hold,
@@ -97,12 +104,14 @@ def main() -> None:
             done = {r["case"]: r for r in old.get("cases", [])}
     rows = []
     for name in args.cases:
-        if name in done and {k: done[name].get(k) for k in CASES[name]} == CASES[name]:
+        if name in done and {k: done[name].get(k) for k in CASES[name]} == CASES[name] \
+                and done[name].get("design_sha256") == design_hash():
             print(f"{name}: kept from {path}")
             rows.append(done[name])
             continue
         rows.append(run_case(name, CASES[name], args.max_evals))
-        kept = [r for r in done.values() if r["case"] not in {x["case"] for x in rows}]
+        kept = [r for r in done.values() if r["case"] not in {x["case"] for x in rows}
+                and r.get("design_sha256") == design_hash()]
         write_result({"max_evals": args.max_evals, "cases": rows + kept}, path, DEFAULT,
                      False, {"cases": {r["case"]: CASES[r["case"]] for r in rows + kept},
                              "max_evals": args.max_evals})
