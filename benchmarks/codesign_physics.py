@@ -23,6 +23,11 @@ Every unit is cached as JSON under ``--cache`` so an interrupted run continues. 
 Usage::
 
     python benchmarks/codesign_physics.py --tasks crawling gripping --pool 36 --codesign 2
+
+A cached unit is a simulator result: after a change to the simulator or a task, give a new
+``--cache`` (the gripping rerun with the clamp and the contact:
+``--tasks gripping --cache ~/.cache/dbtool/codesign-physics-contact
+--out benchmarks/results/codesign-physics-gripping.json``).
 """
 
 from __future__ import annotations
@@ -133,6 +138,8 @@ def main() -> None:
     ap.add_argument("--cache", type=Path,
                     default=Path.home() / ".cache" / "dbtool" / "codesign-physics")
     ap.add_argument("--only", choices=["pool", "codesign"], default=None)
+    ap.add_argument("--out", type=Path, default=None,
+                    help="result file (default benchmarks/results/codesign-physics.json)")
     a = ap.parse_args()
     from dbtool.prior.pipeline import Prior
 
@@ -170,7 +177,7 @@ def main() -> None:
         if rows:
             report(task, rows)
     if a.only is None:
-        write_result(result, None, HERE / "results" / "codesign-physics.json", False,
+        write_result(result, a.out, HERE / "results" / "codesign-physics.json", False,
                      {"benchmark": "codesign-physics", "tasks": a.tasks, "seeds": a.seeds,
                       "pool": a.pool, "codesign": a.codesign,
                       "caption_pool": a.caption_pool})
