@@ -169,6 +169,36 @@ def side_view(ro, path: Path, steps=(0, 25, 50, 75, 100)) -> None:
     plt.close(fig)
 
 
+def run_units(run: Path) -> float:
+    """Simulator units a design run planned (docs/results.md's units: a forward episode is 1,
+    a gradient episode GRAD_COST): its embedding samples, each co-design sample's Langevin
+    steps with their line searches, and that sample's score."""
+    from dbtool.codesign.config import CodesignConfig, n_steps, step_units
+    from dbtool.compare.budget import GRAD_COST
+
+    cfg = json.loads((run / "config.json").read_text())
+    emb = cfg["embedding"]
+    cod = CodesignConfig(**{**cfg["codesign"], "search": tuple(cfg["codesign"]["search"])})
+    return (emb["epochs"] * emb["samples_per_epoch"]
+            + cod.samples * (n_steps(cod) * step_units(cod, GRAD_COST) + 1))
+
+
+def prior_pool(compare: Path) -> np.ndarray:
+    """Every prior sample's metric in a comparison's finished ``prior`` gripping cells (each scores
+    ``units - 1`` samples of the prior from DiffuseBot's starting embedding)."""
+    out = []
+    for cell in sorted((compare / "cells").glob("prior-gripping-s*")):
+        rec = json.loads((cell / "cell.json").read_text()) if (cell / "cell.json").is_file() \
+            else {}
+        if rec.get("status") != "done":
+            continue  # an unfinished cell
+        for line in (cell / "metrics.jsonl").read_text().splitlines():
+            r = json.loads(line)
+            if r.get("phase") == "sample":
+                out.append(np.nan if r["metric"] is None else r["metric"])
+    return np.array(out, float)
+
+
 def run_prior_best(run: Path) -> tuple[float | None, float | None]:
     """Best epoch-0 (null-embedding) sample and best embedding-epoch sample of a run (None for
     a folder without a run's metrics, e.g. an export)."""
@@ -203,6 +233,8 @@ def main() -> None:
                     "default result) here; with no runs, only that")
     ap.add_argument("--out", type=Path)
     ap.add_argument("--figures", type=Path, help="write each design's side view here")
+    ap.add_argument("--prior-pool", type=Path, help="a comparison folder: its prior samples "
+                    "on gripping give the expected best of N draws, N = each run's units")
     ap.add_argument("--lift", type=Path, help="with --figures: also draw this run's grip, "
                     "from the fingers' first touch to the cube's highest touching lift "
                     "(NAME-lift.png)")
@@ -277,6 +309,22 @@ def main() -> None:
                 if len(diff) > 1 and diff.std(ddof=1) > 0 else None,
                 "higher": int((diff > 0).sum())},
         }
+    if des and a.prior_pool:
+        sys.path.insert(0, str(Path(__file__).parent))
+        from codesign_physics import expected_best
+
+        pool = prior_pool(a.prior_pool)
+        best = np.array([expected_best(pool, int(run_units(run))) for run in sorted(a.runs)
+                         if (run / "design.npz").is_file() and run_prior_best(run)[0] is not None])
+        d = m - best
+        summary["vs_prior_best_of_n"] = {
+            "pool": int(np.isfinite(pool).sum()), "pool_from": str(a.prior_pool),
+            "units": [run_units(r) for r in sorted(a.runs) if (r / "design.npz").is_file()
+                      and run_prior_best(r)[0] is not None],
+            "expected_best": best.tolist(), "mean": float(d.mean()),
+            "sd": float(d.std(ddof=1)), "higher": int((d > 0).sum()),
+            "z": float(d.mean() / (d.std(ddof=1) / np.sqrt(len(d)))) if d.std(ddof=1) > 0
+            else None}
     print(summary)
     write_result({"rows": rows, "summary": summary}, a.out, RESULTS / "gripping-designs.json",
                  False, {"runs": [str(r) for r in a.runs]})
