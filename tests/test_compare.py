@@ -178,6 +178,51 @@ def test_a_method_that_does_not_read_the_seed_runs_once_per_task(serial_run, tmp
         ("particle", "crawling", "0")][4]
 
 
+def _children(pid: int) -> set[int]:
+    out = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.add(int(stat.parent.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads the process table in /proc")
+def test_local_workers_exit_when_the_comparison_is_killed(tmp_path):
+    """A SIGKILLed ``dbtool compare`` cannot shut its pool down: its local workers notice the
+    parent is gone and exit instead of computing cells nobody collects."""
+    out = tmp_path / "orphans"
+    proc = subprocess.Popen([*CLI, *SMOKE, "--tasks", "crawling", "--methods", "particle",
+                             "--methods", "prior", "--executor", "local", "--workers", "2",
+                             "--out", str(out)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, env=ENV)
+    try:
+        deadline = time.monotonic() + 300
+        while time.monotonic() < deadline and proc.poll() is None and not (
+                (out / "cells").is_dir() and len(list((out / "cells").iterdir())) == 2):
+            time.sleep(0.2)  # both workers have started a cell
+        workers = _children(proc.pid)
+    finally:
+        proc.kill()
+        proc.wait(timeout=60)
+    assert proc.returncode == -signal.SIGKILL and len(workers) >= 2
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and any(_alive(w) for w in workers):
+        time.sleep(0.5)
+    assert not any(_alive(w) for w in workers), "workers outlived the comparison"
+
+
 def test_resume_after_a_kill_skips_the_finished_cell(serial_run, tmp_path):
     out = tmp_path / "killed"
     methods = ("particle", "prior")

@@ -6,7 +6,10 @@ so the same cells give the same numbers wherever they run.
 
 from __future__ import annotations
 
+import os
 import socket
+import threading
+import time
 from collections.abc import Callable, Iterable, Iterator
 
 from dbtool.compare.cells import CellSpec, run_cell, worker_init
@@ -37,14 +40,28 @@ def execute(specs: list[CellSpec], executor: str, workers: int = 2,
     return _ray(specs, workers, address)
 
 
+def _follow_parent(parent: int, poll_s: float = 1.0) -> None:
+    """Exit this worker once ``parent`` (the ``dbtool compare`` process) is gone: a killed
+    comparison must not leave workers computing cells nobody collects."""
+    while os.getppid() == parent:
+        time.sleep(poll_s)
+    os._exit(1)
+
+
+def _local_worker_init(threads: int, arch: str, parent: int) -> None:
+    threading.Thread(target=_follow_parent, args=(parent,), daemon=True).start()
+    worker_init(threads, arch)
+
+
 def _local(specs: list[CellSpec], workers: int) -> Iterator[dict]:
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from concurrent.futures.process import BrokenProcessPool
 
     ctx = mp.get_context("spawn")  # Taichi and torch do not survive fork
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=worker_init,
-                             initargs=(specs[0].threads, specs[0].arch)) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx,
+                             initializer=_local_worker_init,
+                             initargs=(specs[0].threads, specs[0].arch, os.getpid())) as pool:
         futures = {pool.submit(run_cell, s): s for s in specs}
         for fut in as_completed(futures):
             try:
