@@ -72,11 +72,9 @@ def grip(ro) -> dict:
     from dbtool.sim.tasks.base import DX
 
     ep, P = ro.episode, ro.positions
-    fingers = (ep.info["finger"] > 0) & (ep.particles.phi > 0)
     cube = ep.object_mask
     lo, hi = P[:, cube].min(1), P[:, cube].max(1)  # the cube's box per step
-    gap = np.maximum(np.maximum(lo[:, None] - P[:, fingers], P[:, fingers] - hi[:, None]), 0)
-    near = np.linalg.norm(gap, axis=2).min(1) * MM  # closest finger per step (mm)
+    near = nearest_mm(ro)  # closest finger per step (mm)
     c = P[:, cube, 1].mean(1)
     lift = (c - c[0]) * MM
     up = (lo[:, 1] - lo[0, 1]) * MM > 1.0
@@ -109,14 +107,20 @@ def zero_gradient_stops(run: Path) -> tuple[int, int]:
 CONTACT_MM = 2.5  # one particle spacing: particle centres this close, the surfaces meet
 
 
-def contact(ro) -> np.ndarray:
-    """Per step: is a finger particle's centre within ``CONTACT_MM`` of the box of the cube's
-    particle centres (each particle fills a 2.5 mm cell, so the two surfaces meet)?"""
+def nearest_mm(ro) -> np.ndarray:
+    """Per step: the distance (mm) from the nearest active finger particle to the box of the
+    cube's particle centres."""
     ep, P = ro.episode, ro.positions
     fingers = (ep.info["finger"] > 0) & (ep.particles.phi > 0)
     lo, hi = P[:, ep.object_mask].min(1), P[:, ep.object_mask].max(1)
     gap = np.maximum(np.maximum(lo[:, None] - P[:, fingers], P[:, fingers] - hi[:, None]), 0)
-    return np.linalg.norm(gap, axis=2).min(1) * MM <= CONTACT_MM
+    return np.linalg.norm(gap, axis=2).min(1) * MM
+
+
+def contact(ro) -> np.ndarray:
+    """Per step: is a finger particle's centre within ``CONTACT_MM`` of the box of the cube's
+    particle centres (each particle fills a 2.5 mm cell, so the two surfaces meet)?"""
+    return nearest_mm(ro) <= CONTACT_MM
 
 
 def lift_steps(ro) -> list[int]:
