@@ -7,4 +7,4 @@ while pgrep -f "q.sh" > /dev/null; do sleep 30; done
 METHODS=${METHODS:-all}
 d=~/.cache/dbtool/compare35n
 if [ -f $d/compare.json ]; then r=--resume; else r=--no-resume; fi
-dbtool compare --budget quick --tasks gripping --methods $METHODS --seeds 0 1 2 3 4 5 6 7 --executor local --workers 2 --threads 1 --out $d $r
+dbtool compare --budget quick --tasks gripping --methods $METHODS --seeds 0 1 2 3 4 5 6 7 --executor local --workers ${WORKERS:-2} --threads 1 --out $d $r
