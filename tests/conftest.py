@@ -1,7 +1,8 @@
 """Shared fixtures: one Taichi runtime (CPU, float32) for the whole session.
 
 Kernels take ndarrays, so they compile once per precision and are shared by every test;
-the gradient checks switch to float64 for their module and back afterwards.
+the gradient checks switch to float64 for their module and back afterwards. Under
+pytest-xdist (``pytest -n 2``, as CI runs) each worker process has its own runtime.
 """
 
 import os
@@ -9,6 +10,11 @@ import os
 import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1:
+    # pytest-xdist workers share the cores: one Taichi and one torch thread each (set before
+    # either is imported; subprocesses the tests start inherit it).
+    for _var in ("DBTOOL_THREADS", "OMP_NUM_THREADS"):
+        os.environ.setdefault(_var, "1")
 
 
 @pytest.fixture(autouse=True, scope="module")

@@ -14,26 +14,29 @@ import numpy as np
 
 from dbtool.sim import kernels as K
 from dbtool.sim import kernels_adjoint as KA
+from dbtool.sim.graphs import Call
 from dbtool.sim.state import Adjoint, State
 from dbtool.sim.stepper import Region, Stepper
 
 
-def _substep_adjoint(sp: Stepper, adj: Adjoint, s: int, r: Region) -> None:
-    """Adjoint of substep ``s``: g2p, grid_op, then p2g with the stress."""
+def _substep_adjoint(sp: Stepper, adj: Adjoint, s: int, r: Region) -> list[Call]:
+    """The kernel calls of the adjoint of substep ``s``: g2p, grid_op, then p2g with the
+    stress."""
     sc, m, st, g, b, n = sp.scene, sp.mat, sp.state, sp.grid, sp.body, sp.n
     multi, mu_c = g.multi, sc.object_friction or 0.0
     if sp.atomic:
-        KA.g2p_grad_atomic(st.x, g.v, b.glued, b.field, g.ov, adj.x, adj.v, adj.C, adj.scratch,
-                           adj.oscratch, s, n, *r, sc.dx, m.dt, multi)
+        g2p = (KA.g2p_grad_atomic, (st.x, g.v, b.glued, b.field, g.ov, adj.x, adj.v, adj.C,
+                                    adj.scratch, adj.oscratch, s, n, *r, sc.dx, m.dt, multi))
     else:
-        KA.g2p_grad(st.x, g.v, b.glued, b.field, g.ov, adj.x, adj.v, adj.C, adj.scratch,
-                    adj.oscratch, s, n, sp.chunks, *r, sc.dx, m.dt, multi)
-    KA.grid_op_grad(adj.scratch, g.m, g.vin, adj.grid, sp.boxes, g.clamp, adj.oscratch, g.om,
-                    g.ovin, g.r0, g.o0, g.gm, g.og, adj.ogrid, adj.ngrid, s, sp.chunks,
-                    *sp.dims, *r, sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction,
-                    sc.damp(m.dt), multi, mu_c)
-    KA.p2g_grad(*st, *b.stress, adj.grid, adj.ogrid, adj.ngrid, *adj.p2g, s, n, *r,
-                *sp.consts, multi)
+        g2p = (KA.g2p_grad, (st.x, g.v, b.glued, b.field, g.ov, adj.x, adj.v, adj.C,
+                             adj.scratch, adj.oscratch, s, n, sp.chunks, *r, sc.dx, m.dt,
+                             multi))
+    return [g2p, (KA.grid_op_grad, (
+        adj.scratch, g.m, g.vin, adj.grid, sp.boxes, g.clamp, adj.oscratch, g.om, g.ovin, g.r0,
+        g.o0, g.gm, g.og, adj.ogrid, adj.ngrid, s, sp.chunks, *sp.dims, *r, sc.dx, m.dt,
+        sc.gravity, sc.ground_y, sc.friction, sc.damp(m.dt), multi, mu_c)),
+        (KA.p2g_grad, (*st, *b.stress, adj.grid, adj.ogrid, adj.ngrid, *adj.p2g, s, n, *r,
+                       *sp.consts, multi))]
 
 
 def _seed(adj: Adjoint, slot: int, g: np.ndarray) -> None:
@@ -78,8 +81,8 @@ def backward(sp: Stepper, checkpoints: State, adj: Adjoint, regions: Sequence[Re
             if t + 1 in steps:
                 _seed(adj, S, steps[t + 1])
         adj.actp.fill(0)
-        for s in reversed(range(S)):
-            _substep_adjoint(sp, adj, s, r)
+        calls = [c for s in reversed(range(S)) for c in _substep_adjoint(sp, adj, s, r)]
+        sp.launcher.run(calls, key=("adjoint", sp.atomic))
         # d loss / d u_t = sum_p w_p a_p-adjoint, summed here in a fixed order (before
         # the autodiff kernel, which clears the adjoint of the overwritten a_p): its atomic
         # adds from all particles into one number per group differ in the last bits from

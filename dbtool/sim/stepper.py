@@ -17,6 +17,7 @@ import taichi as ti
 
 from dbtool.sim import kernels as K
 from dbtool.sim.boundaries import MAX_BOXES
+from dbtool.sim.graphs import Call, Launcher
 from dbtool.sim.model import Material, Scene
 from dbtool.sim.state import ArrayPool, Body, Constants, Grid, State
 
@@ -69,6 +70,7 @@ class Stepper:
         for b, (c, h) in enumerate(scene.boxes):
             boxes[b] = (*c, *h)
         self.boxes.from_numpy(boxes)
+        self.launcher = Launcher(dtype)
 
     # ----------------------------------------------------------------- regions
     def region(self, lo: np.ndarray, hi: np.ndarray, vmax: float) -> Region:
@@ -93,29 +95,40 @@ class Stepper:
         return bb[0], bb[1], float(st[0]), int(st[1])
 
     # ----------------------------------------------------------------- stepping
-    def substep(self, s: int, r: Region, last: bool = False) -> None:
-        """Substep ``s``: slot ``s`` of the state to slot ``s + 1`` (``last`` skips g2p)."""
+    def substep_calls(self, s: int, r: Region, last: bool = False) -> list[Call]:
+        """The kernel calls of substep ``s``: slot ``s`` of the state to slot ``s + 1``
+        (``last`` skips g2p)."""
         sc, m, st, g = self.scene, self.mat, self.state, self.grid
         multi, mu_c = g.multi, self.scene.object_friction or 0.0
         if self.atomic:
-            K.p2g_atomic(*st, *self.body.stress, *g.p2g, s, self.n, *r, *self.consts, multi)
+            p2g = (K.p2g_atomic, (*st, *self.body.stress, *g.p2g, s, self.n, *r,
+                                  *self.consts, multi))
         else:
-            K.p2g(*st, *self.body.stress, *g.p2g, s, self.n, self.chunks, *r, *self.consts,
-                  multi)
-        K.grid_op(g.scratch, g.m, g.vin, g.v, self.boxes, g.clamp, *g.objects, s, self.chunks,
-                  *self.dims, *r, sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction,
-                  sc.damp(m.dt), multi, mu_c)
+            p2g = (K.p2g, (*st, *self.body.stress, *g.p2g, s, self.n, self.chunks, *r,
+                           *self.consts, multi))
+        calls = [p2g, (K.grid_op, (
+            g.scratch, g.m, g.vin, g.v, self.boxes, g.clamp, *g.objects, s, self.chunks,
+            *self.dims, *r, sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction, sc.damp(m.dt),
+            multi, mu_c))]
         if not last:
-            K.g2p(st.x, st.v, st.C, g.v, self.body.glued, self.body.field, g.ov, s, self.n, *r,
-                  sc.dx, m.dt, multi)
+            calls.append((K.g2p, (st.x, st.v, st.C, g.v, self.body.glued, self.body.field,
+                                  g.ov, s, self.n, *r, sc.dx, m.dt, multi)))
+        return calls
+
+    def substep(self, s: int, r: Region, last: bool = False) -> None:
+        """Substep ``s`` (see :meth:`substep_calls`), launched kernel by kernel."""
+        for kernel, args in self.substep_calls(s, r, last):
+            kernel(*args)
 
     def segment(self, t: int, r: Region, replay: bool = False) -> None:
-        """The substeps of control step ``t``. A backward ``replay`` skips the last g2p: its
-        output is the next checkpoint, which the adjoint pass does not read."""
+        """The substeps of control step ``t``, one compute-graph launch
+        (:mod:`dbtool.sim.graphs`). A backward ``replay`` skips the last g2p: its output is
+        the next checkpoint, which the adjoint pass does not read."""
         b = self.body
-        K.actuation(b.wact, b.act, b.actp, t, self.n)
+        calls: list[Call] = [(K.actuation, (b.wact, b.act, b.actp, t, self.n))]
         for s in range(self.substeps):
-            self.substep(s, r, last=replay and s == self.substeps - 1)
+            calls += self.substep_calls(s, r, last=replay and s == self.substeps - 1)
+        self.launcher.run(calls, key=("segment", replay, self.atomic))
 
     def check(self, t: int, r: Region) -> tuple[np.ndarray, np.ndarray, float]:
         """Fail loudly on NaN or on particles that outran the grid region of control step
