@@ -25,6 +25,11 @@ second run, in a fresh subprocess whose Taichi offline cache is an empty tempora
 option) -> "cold"; then again in a second fresh subprocess with the now populated cache ->
 "warm cache".
 
+``--compare REF ...`` also times older commits on the same workload in the same run: each
+is checked out into a temporary git worktree and the speed worker runs with that checkout's
+``dbtool`` first on ``PYTHONPATH``. The versions alternate (two rounds, the second in reverse
+order) and each keeps its faster round, so slow drifts of the machine hit all of them.
+
 Prints a markdown table with the goals next to the numbers and writes the same numbers, with the
 machine description, to ``benchmarks/results/sim.json`` (``sim-quick.json`` with ``--quick``).
 
@@ -33,6 +38,7 @@ Usage::
     python benchmarks/sim.py                # full run, a few minutes on 2 cores
     python benchmarks/sim.py --quick        # CI smoke test: 5k particles, T=5, 1 repeat
     python benchmarks/sim.py --sizes 20000 --steps 10 --repeats 5 --out /tmp/sim.json
+    python benchmarks/sim.py --sizes 20000 --compare 76896e1 9604657   # against old commits
 """
 
 from __future__ import annotations
@@ -57,7 +63,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 from _sim_report import REFERENCE, evaluate_goals, render  # noqa: E402
 
-from dbtool.sim.model import SUBSTEPS  # noqa: E402
+try:
+    from dbtool.sim.model import SUBSTEPS  # noqa: E402
+except ImportError:  # an older checkout (--compare): before the model/state/stepper split
+    from dbtool.sim.simulator import SUBSTEPS  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "sim.json"
@@ -263,10 +272,11 @@ def children_cpu_s() -> float:
 
 
 def spawn(kind: str, extra: list[str], threads: int | None,
-          env_extra: dict[str, str] | None = None) -> dict[str, Any]:
-    """Run a worker in a fresh Python process and return its JSON result."""
+          env_extra: dict[str, str] | None = None, code: Path = ROOT) -> dict[str, Any]:
+    """Run a worker in a fresh Python process (importing ``dbtool`` from ``code``) and return
+    its JSON result."""
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(code), env.get("PYTHONPATH")) if p)
     env.setdefault("TI_LOG_LEVEL", "warn")
     env.update(env_extra or {})
     with tempfile.TemporaryDirectory(prefix="dbtool-bench-") as tmp:
@@ -276,7 +286,7 @@ def spawn(kind: str, extra: list[str], threads: int | None,
         if threads:
             cmd += ["--threads", str(threads)]
         busy0, own0, wall0 = busy_cpu_s(), children_cpu_s(), time.perf_counter()
-        proc = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True)
+        proc = subprocess.run(cmd, env=env, cwd=code, capture_output=True, text=True)
         busy1, own1, wall1 = busy_cpu_s(), children_cpu_s(), time.perf_counter()
         if proc.returncode != 0 or not out.exists():
             tail = (proc.stdout + proc.stderr)[-4000:]
@@ -287,6 +297,48 @@ def spawn(kind: str, extra: list[str], threads: int | None,
         other = max(0.0, (busy1 - busy0) - (own1 - own0)) / max(wall1 - wall0, 1e-9)
         result["other_load_cores"] = round(other, 3)
     return result
+
+
+def git(*args: str) -> str:
+    return subprocess.run(["git", *args], cwd=ROOT, check=True, capture_output=True,
+                          text=True).stdout.strip()
+
+
+def measure_versions(refs: list[str], sides: list[int], steps: int, repeats: int,
+                     threads: int | None, log: Callable[[str], None]) -> list[dict[str, Any]]:
+    """Speed of each old commit and of this checkout on the same workload, interleaved."""
+    tmp = Path(tempfile.mkdtemp(prefix="dbtool-versions-"))
+    versions: list[dict[str, Any]] = []
+    try:
+        for ref in refs:
+            commit = git("rev-parse", "--verify", f"{ref}^{{commit}}")
+            path = tmp / commit[:12]
+            git("worktree", "add", "--detach", str(path), commit)
+            versions.append({"ref": ref, "commit": commit, "path": path,
+                             "subject": git("log", "-1", "--format=%s", commit)[:100]})
+        versions.append({"ref": "this checkout", "commit": git("rev-parse", "HEAD"),
+                         "path": ROOT, "subject": "(working tree)"})
+        for v in versions:
+            v["speed"] = {}
+        order = versions + versions[::-1]
+        for side in sides:
+            for round_, v in enumerate(order):
+                log(f"versions: {v['ref']} ({side ** 3} particles, "
+                    f"round {round_ // len(versions) + 1})")
+                row = spawn("speed", ["--side", str(side), "--steps", str(steps),
+                                      "--repeats", str(repeats)], threads, code=v["path"])
+                best = v["speed"].get(side)
+                if best is None or row["forward_pss"] + row["fwd_bwd_pss"] > \
+                        best["forward_pss"] + best["fwd_bwd_pss"]:
+                    v["speed"][side] = row
+    finally:
+        for v in versions:
+            if v["path"] != ROOT:
+                subprocess.run(["git", "worktree", "remove", "--force", str(v["path"])],
+                               cwd=ROOT, capture_output=True)
+        shutil.rmtree(tmp, ignore_errors=True)
+    return [{"ref": v["ref"], "commit": v["commit"], "subject": v["subject"],
+             "speed": [v["speed"][side] for side in sides]} for v in versions]
 
 
 def dir_stats(path: Path) -> tuple[int, int]:
@@ -360,6 +412,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--quick", action="store_true",
                    help="CI smoke test: 5k particles only, T=5, 1 repeat, memory at T=5")
     p.add_argument("--skip-compile", action="store_true", help="skip the JIT compile timing")
+    p.add_argument("--skip-memory", action="store_true", help="skip the peak-memory episodes")
+    p.add_argument("--compare", nargs="+", default=[], metavar="REF",
+                   help="older commits to time on the same workload in the same run")
     p.add_argument("--out", type=Path, default=None,
                    help=f"JSON output (default {DEFAULT_OUT.relative_to(ROOT)}, "
                         f"{QUICK_OUT.relative_to(ROOT)} with --quick)")
@@ -396,9 +451,12 @@ def main(argv: list[str] | None = None) -> int:
         log(f"speed: {side ** 3} particles, T={args.steps}, {args.repeats} repeats")
         speed.append(spawn("speed", ["--side", str(side), "--steps", str(args.steps),
                                      "--repeats", str(args.repeats)], args.threads))
-        log(f"memory: {side ** 3} particles, T={args.mem_steps}")
-        memory.append(spawn("memory", ["--side", str(side), "--steps", str(args.mem_steps)],
-                            args.threads))
+        if not args.skip_memory:
+            log(f"memory: {side ** 3} particles, T={args.mem_steps}")
+            memory.append(spawn("memory", ["--side", str(side), "--steps", str(args.mem_steps)],
+                                args.threads))
+    versions = measure_versions(args.compare, sides, args.steps, args.repeats, args.threads,
+                                log) if args.compare else []
 
     result: dict[str, Any] = {
         "benchmark": "dbtool.sim",
@@ -410,12 +468,13 @@ def main(argv: list[str] | None = None) -> int:
         "config": {
             "sizes": [s ** 3 for s in sides], "sides": sides, "steps": args.steps,
             "substeps": SUBSTEPS, "repeats": args.repeats, "mem_steps": args.mem_steps,
-            "warmup_episodes": 1, "quick": args.quick, "spacing": SPACING, "dx": 0.005,
+            "warmup_episodes": 1, "quick": args.quick, "compare": args.compare,
+            "spacing": SPACING, "dx": 0.005,
             "E": E_MODULUS, "actions": f"{AMPLITUDE}*sin, 2 groups, period {PERIOD} steps",
         },
         "units": {"*_pss": "particle-substeps per second", "*_s": "seconds",
                   "*_mb": "MiB (VmHWM / VmRSS)"},
-        "speed": speed, "memory": memory, "compile": compile_,
+        "speed": speed, "memory": memory, "compile": compile_, "versions": versions,
         "reference": REFERENCE,
     }
     result["goals"] = evaluate_goals(speed, memory, compile_)

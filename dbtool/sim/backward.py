@@ -24,19 +24,20 @@ def _substep_adjoint(sp: Stepper, adj: Adjoint, s: int, r: Region) -> list[Call]
     stress."""
     sc, m, st, g, b, n = sp.scene, sp.mat, sp.state, sp.grid, sp.body, sp.n
     multi, mu_c = g.multi, sc.object_friction or 0.0
+    obj = bool(multi)  # the kernel variant: with or without a task object's own field
+    g2p_args = (st.x, g.v, b.glued, b.field, g.ov, adj.x, adj.v, adj.C, adj.scratch,
+                adj.oscratch, s, n)
+    tail = (*r, sc.dx, m.dt, multi)
     if sp.atomic:
-        g2p = (KA.g2p_grad_atomic, (st.x, g.v, b.glued, b.field, g.ov, adj.x, adj.v, adj.C,
-                                    adj.scratch, adj.oscratch, s, n, *r, sc.dx, m.dt, multi))
+        g2p = (KA.g2p_grad_atomic[obj], (*g2p_args, *tail))
     else:
-        g2p = (KA.g2p_grad, (st.x, g.v, b.glued, b.field, g.ov, adj.x, adj.v, adj.C,
-                             adj.scratch, adj.oscratch, s, n, sp.chunks, *r, sc.dx, m.dt,
-                             multi))
+        g2p = (KA.g2p_grad[obj], (*g2p_args, sp.chunks, *tail))
     return [g2p, (KA.grid_op_grad, (
         adj.scratch, g.m, g.vin, adj.grid, sp.boxes, g.clamp, adj.oscratch, g.om, g.ovin, g.r0,
         g.o0, g.gm, g.og, adj.ogrid, adj.ngrid, s, sp.chunks, *sp.dims, *r, sc.dx, m.dt,
         sc.gravity, sc.ground_y, sc.friction, sc.damp(m.dt), multi, mu_c)),
-        (KA.p2g_grad, (*st, *b.stress, adj.grid, adj.ogrid, adj.ngrid, *adj.p2g, s, n, *r,
-                       *sp.consts, multi))]
+        (KA.p2g_grad[obj], (*st, *b.stress, adj.grid, adj.ogrid, adj.ngrid, *adj.p2g, s, n,
+                            *r, *sp.consts, multi))]
 
 
 def _seed(adj: Adjoint, slot: int, g: np.ndarray) -> None:

@@ -134,7 +134,7 @@ def _p2g_particle(
     E: ti.template(), actp: ti.template(), adir: ti.template(), damp: ti.template(),
     field: ti.template(), scratch: ti.template(), oscratch: ti.template(),
     nscratch: ti.template(), xscratch: ti.template(), s, p, c, lo, hi, dx, dt, p_vol, p_rho, nu,
-    act_strength, multi, atomic: ti.template(),
+    act_strength, multi: ti.template(), atomic: ti.template(),
 ):
     Ap = _stress(C, F, phi, E, actp, adir, s, p, dx, dt, p_vol, p_rho, nu, act_strength)
     m_unit = p_rho * p_vol
@@ -145,65 +145,88 @@ def _p2g_particle(
     w, dw = _weights(fx)
     m = m_unit * phi[p]
     mv = (m * damp[p]) * v[s, p]
-    obj = multi != 0 and field[p] > 0.0
-    for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-        off = ti.Vector([i, j, k])
-        wt = w[i][0] * w[j][1] * w[k][2]
-        mom = wt * (mv + Ap @ ((ti.cast(off, float) - fx) * dx))
-        val = ti.Vector([mom[0], mom[1], mom[2], wt * m])
-        I = base + off
-        if obj:
-            _scatter(oscratch, c, I, val, atomic)
-            gw = (m * inv_dx) * _dweights(w, dw, i, j, k)
-            mx = (wt * m) * xp
-            _scatter(nscratch, c, I, ti.Vector([gw[0], gw[1], gw[2], mx[0], mx[1], mx[2]]),
-                     atomic)
-        else:
-            _scatter(scratch, c, I, val, atomic)
-            if multi != 0:
-                _scatter(xscratch, c, I, (wt * m) * xp, atomic)
+    obj = False
+    if ti.static(multi):
+        obj = field[p] > 0.0
+    # APIC momentum at node off: w (mv + A (off - fx) dx) = w (q0 + i a0 + j a1 + k a2) with
+    # q0 = mv - dx A fx and a_c = dx A[:, c], built up along the i, j, k loops.
+    dA = dx * Ap
+    q0 = mv - dA @ fx
+    for i in ti.static(range(3)):
+        qi = q0 + float(i) * ti.Vector([dA[0, 0], dA[1, 0], dA[2, 0]])
+        for j in ti.static(range(3)):
+            qij = qi + float(j) * ti.Vector([dA[0, 1], dA[1, 1], dA[2, 1]])
+            wij = w[i][0] * w[j][1]
+            for k in ti.static(range(3)):
+                wt = wij * w[k][2]
+                mom = wt * (qij + float(k) * ti.Vector([dA[0, 2], dA[1, 2], dA[2, 2]]))
+                val = ti.Vector([mom[0], mom[1], mom[2], wt * m])
+                I = base + ti.Vector([i, j, k])
+                if ti.static(multi):
+                    if obj:
+                        _scatter(oscratch, c, I, val, atomic)
+                        gw = (m * inv_dx) * _dweights(w, dw, i, j, k)
+                        mx = (wt * m) * xp
+                        _scatter(nscratch, c, I,
+                                 ti.Vector([gw[0], gw[1], gw[2], mx[0], mx[1], mx[2]]), atomic)
+                    else:
+                        _scatter(scratch, c, I, val, atomic)
+                        _scatter(xscratch, c, I, (wt * m) * xp, atomic)
+                else:
+                    _scatter(scratch, c, I, val, atomic)
 
 
-@ti.kernel
-def p2g(
-    x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(), damp: nd(),
-    field: nd(), scratch: nd(), oscratch: nd(), nscratch: nd(), xscratch: nd(), s: ti.i32,
-    n: ti.i32, chunks: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32,
-    hz: ti.i32,
-    dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
-    multi: ti.i32,
-):
-    """Stress, then scatter of mass and APIC momentum; ``chunks`` particle ranges go into
-    separate grid copies with plain adds (one range per CPU thread). With ``multi`` the
-    object particles (``field`` 1) scatter into their own field ``oscratch`` and their mass
-    gradient and mass-weighted positions into ``nscratch``; the robot's mass-weighted
-    positions go into ``xscratch``."""
-    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
-    for q in range(chunks * SPREAD):
-        if q % SPREAD != 0:
-            continue
-        c = q // SPREAD
-        a, b = _range(c, chunks, n)
-        for p in range(a, b):
+def _p2g_kernels(multi: bool) -> tuple:
+    """:func:`p2g` and :func:`p2g_atomic` compiled for one value of ``multi`` (the kernels'
+    ``multi`` argument is then only informative): a body without a task object skips the
+    object field's branches altogether."""
+    multi_ = multi
+
+    @ti.kernel
+    def p2g(
+        x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
+        damp: nd(), field: nd(), scratch: nd(), oscratch: nd(), nscratch: nd(), xscratch: nd(),
+        s: ti.i32, n: ti.i32, chunks: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32,
+        hy: ti.i32, hz: ti.i32, dx: float, dt: float, p_vol: float, p_rho: float, nu: float,
+        act_strength: float, multi: ti.i32,
+    ):
+        """Stress, then scatter of mass and APIC momentum; ``chunks`` particle ranges go into
+        separate grid copies with plain adds (one range per CPU thread). With ``multi`` the
+        object particles (``field`` 1) scatter into their own field ``oscratch`` and their
+        mass gradient and mass-weighted positions into ``nscratch``; the robot's
+        mass-weighted positions go into ``xscratch``."""
+        lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+        for q in range(chunks * SPREAD):
+            if q % SPREAD != 0:
+                continue
+            c = q // SPREAD
+            a, b = _range(c, chunks, n)
+            for p in range(a, b):
+                _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, field, scratch, oscratch,
+                              nscratch, xscratch, s, p, c, lo, hi, dx, dt, p_vol, p_rho, nu,
+                              act_strength, multi_, False)
+
+    @ti.kernel
+    def p2g_atomic(
+        x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
+        damp: nd(), field: nd(), scratch: nd(), oscratch: nd(), nscratch: nd(), xscratch: nd(),
+        s: ti.i32, n: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32,
+        hz: ti.i32, dx: float, dt: float, p_vol: float, p_rho: float, nu: float,
+        act_strength: float, multi: ti.i32,
+    ):
+        """Massively parallel variant of :func:`p2g` (GPU): one grid copy, atomic adds."""
+        lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+        for p in range(n):
             _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, field, scratch, oscratch,
-                          nscratch, xscratch, s, p, c, lo, hi, dx, dt, p_vol, p_rho, nu,
-                          act_strength, multi, False)
+                          nscratch, xscratch, s, p, 0, lo, hi, dx, dt, p_vol, p_rho, nu,
+                          act_strength, multi_, True)
+
+    return p2g, p2g_atomic
 
 
-@ti.kernel
-def p2g_atomic(
-    x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(), damp: nd(),
-    field: nd(), scratch: nd(), oscratch: nd(), nscratch: nd(), xscratch: nd(), s: ti.i32,
-    n: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
-    dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
-    multi: ti.i32,
-):
-    """Massively parallel variant of :func:`p2g` (GPU): one grid copy, atomic adds."""
-    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
-    for p in range(n):
-        _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, field, scratch, oscratch,
-                      nscratch, xscratch, s, p, 0, lo, hi, dx, dt, p_vol, p_rho, nu, act_strength,
-                      multi, True)
+# ``p2g[multi]``, ``p2g_atomic[multi]``: the variants for a scene with (True) or without a task
+# object that has its own velocity field.
+p2g, p2g_atomic = ({m: _p2g_kernels(m)[i] for m in (False, True)} for i in (0, 1))
 
 
 # --------------------------------------------------------------------------- grid
@@ -284,36 +307,48 @@ def grid_op(
 
 
 # --------------------------------------------------------------------------- g2p
-@ti.kernel
-def g2p(
-    x: nd(), v: nd(), C: nd(), grid_v: nd(), glued: nd(), field: nd(), grid_ov: nd(),
-    s: ti.i32, n: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32,
-    hz: ti.i32, dx: float, dt: float, multi: ti.i32,
-):
-    """Gather APIC velocity and affine matrix, then advect (glued particles stay put); with
-    ``multi`` the object particles gather from their own field ``grid_ov``."""
-    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
-    for p in range(n):
-        inv_dx = 1.0 / dx
-        xp = x[s, p]
-        base = _base(xp, inv_dx, lo, hi)
-        fx = xp * inv_dx - ti.cast(base, float)
-        w, _dw = _weights(fx)
-        obj = multi != 0 and field[p] > 0.0
-        new_v = ti.Vector([0.0, 0.0, 0.0])
-        new_C = ti.Matrix.zero(float, 3, 3)
-        for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-            off = ti.Vector([i, j, k])
-            gv = grid_v[s, base[0] + i, base[1] + j, base[2] + k]
-            if obj:
-                gv = grid_ov[s, base[0] + i, base[1] + j, base[2] + k]
-            wt = w[i][0] * w[j][1] * w[k][2]
-            new_v += wt * gv
-            new_C += (4.0 * inv_dx * wt) * gv.outer_product(ti.cast(off, float) - fx)
-        keep = 1.0 - glued[p]
-        v[s + 1, p] = keep * new_v
-        C[s + 1, p] = keep * new_C
-        x[s + 1, p] = xp + (keep * dt) * new_v
+def _g2p_kernel(multi: bool):
+    """:func:`g2p` compiled for one value of ``multi`` (see :func:`_p2g_kernels`)."""
+    multi_ = multi
+
+    @ti.kernel
+    def g2p(
+        x: nd(), v: nd(), C: nd(), grid_v: nd(), glued: nd(), field: nd(), grid_ov: nd(),
+        s: ti.i32, n: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32,
+        hz: ti.i32, dx: float, dt: float, multi: ti.i32,
+    ):
+        """Gather APIC velocity and affine matrix, then advect (glued particles stay put);
+        with ``multi`` the object particles gather from their own field ``grid_ov``."""
+        lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+        for p in range(n):
+            inv_dx = 1.0 / dx
+            xp = x[s, p]
+            base = _base(xp, inv_dx, lo, hi)
+            fx = xp * inv_dx - ti.cast(base, float)
+            w, _dw = _weights(fx)
+            obj = False
+            if ti.static(multi_):
+                obj = field[p] > 0.0
+            new_v = ti.Vector([0.0, 0.0, 0.0])
+            new_C = ti.Matrix.zero(float, 3, 3)
+            for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+                off = ti.Vector([i, j, k])
+                gv = grid_v[s, base[0] + i, base[1] + j, base[2] + k]
+                if ti.static(multi_):
+                    if obj:
+                        gv = grid_ov[s, base[0] + i, base[1] + j, base[2] + k]
+                wt = w[i][0] * w[j][1] * w[k][2]
+                new_v += wt * gv
+                new_C += (4.0 * inv_dx * wt) * gv.outer_product(ti.cast(off, float) - fx)
+            keep = 1.0 - glued[p]
+            v[s + 1, p] = keep * new_v
+            C[s + 1, p] = keep * new_C
+            x[s + 1, p] = xp + (keep * dt) * new_v
+
+    return g2p
+
+
+g2p = {m: _g2p_kernel(m) for m in (False, True)}  # ``g2p[multi]``
 
 
 # --------------------------------------------------------------------------- bookkeeping
@@ -337,14 +372,29 @@ def copy_x(x: nd(), x2: nd(), src: ti.i32, dst: ti.i32, n: ti.i32):
 
 
 @ti.kernel
-def bounds(x: nd(), s: ti.i32, n: ti.i32, out: nd(), vmax_out: nd(), v: nd()):
-    """Per-axis min / max particle position, the largest speed component, NaN count."""
-    for p in range(n):
-        xp = x[s, p]
-        vp = v[s, p]
+def bounds(x: nd(), v: nd(), s: ti.i32, n: ti.i32, chunks: ti.i32, big: float, out: nd()):
+    """Per chunk of particles ``c``: ``out[c] = (min x, y, z, max x, y, z, largest speed
+    component, NaN count)`` of slot ``s``, each chunk on its own thread (no shared atomics);
+    the caller reduces over the chunks."""
+    for q in range(chunks * SPREAD):
+        if q % SPREAD != 0:
+            continue
+        c = q // SPREAD
+        a, b = _range(c, chunks, n)
+        lo = ti.Vector([big, big, big])
+        hi = -lo
+        vmax = 0.0
+        nan = 0.0
+        for p in range(a, b):
+            xp = x[s, p]
+            vp = v[s, p]
+            lo = ti.min(lo, xp)
+            hi = ti.max(hi, xp)
+            vmax = ti.max(vmax, ti.abs(vp).max())
+            if not (xp.norm_sqr() >= 0.0 and vp.norm_sqr() >= 0.0):
+                nan += 1.0
         for d in ti.static(range(3)):
-            ti.atomic_min(out[0, d], xp[d])
-            ti.atomic_max(out[1, d], xp[d])
-            ti.atomic_max(vmax_out[0], ti.abs(vp[d]))
-        if not (xp.norm_sqr() >= 0.0 and vp.norm_sqr() >= 0.0):
-            vmax_out[1] += 1.0
+            out[c, d] = lo[d]
+            out[c, 3 + d] = hi[d]
+        out[c, 6] = vmax
+        out[c, 7] = nan

@@ -86,79 +86,93 @@ def _hessian_vjp(w, dw, g, i: ti.template(), j: ti.template(), k: ti.template())
     return out
 
 
-@ti.kernel
-def p2g_grad(
-    x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(), damp: nd(),
-    field: nd(), ggrid: nd(), oggrid: nd(), ngrid: nd(),
-    xg: nd(), vg: nd(), Cg: nd(), Fg: nd(), phig: nd(), Eg: nd(), actpg: nd(),
-    s: ti.i32, n: ti.i32,
-    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
-    dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
-    multi: ti.i32,
-):
-    """Adjoint of :func:`p2g` (scatter and stress): gather the node adjoints
-    ``ggrid = (dL/d mv, dL/d m)`` (``oggrid`` for an object particle with ``multi``, and the
-    adjoint ``ngrid`` of the object's mass gradient), then the constitutive adjoint by hand.
-    Writes the ``v``, ``C`` and ``F`` adjoints of substep ``s``, adds to its ``x`` adjoint and
-    accumulates the ``phi``, ``E`` and muscle-signal adjoints."""
-    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
-    for p in range(n):
-        inv_dx = 1.0 / dx
-        m_unit = p_rho * p_vol
-        xp = x[s, p]
-        base = _base(xp, inv_dx, lo, hi)
-        fx = xp * inv_dx - ti.cast(base, float)
-        w, dw = _weights(fx)
-        ph = phi[p]
-        e = E[p]
-        a = actp[p]
-        d = adir[p]
-        m = m_unit * ph
-        vp = damp[p] * v[s, p]  # the scattered velocity (momentum / m)
-        Cp = C[s, p]
-        Fp = F[s, p]
-        Fn = (ti.Matrix.identity(float, 3) + dt * Cp) @ Fp
-        tau = e * _tau_unit(Fn, Fn @ d, a, nu, act_strength)
-        Ap = (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * tau + (m_unit * ph) * Cp
-        obj = multi != 0 and field[p] > 0.0
-        # dpos = (off - fx) dx, so A dpos = dx (A off - A fx) and every sum over the nodes of
-        # something times dpos splits into a sum with the constant offsets and one with fx.
-        Afx = Ap @ fx
-        sg = ti.Vector([0.0, 0.0, 0.0])  # sum w g
-        sgo = ti.Matrix.zero(float, 3, 3)  # sum w g (x) off
-        sc = ti.Vector([0.0, 0.0, 0.0])  # sum (dL/d w) dw/dfx
-        sh = ti.Vector([0.0, 0.0, 0.0])  # sum H^T gn (object mass gradient, second derivative)
-        gm = 0.0
-        for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-            off = ti.Vector([i, j, k])
-            I = base + off
-            gg = ggrid[I[0], I[1], I[2]]
-            if obj:
-                gg = oggrid[I[0], I[1], I[2]]
-            g = ti.Vector([gg[0], gg[1], gg[2]])
-            wt = w[i][0] * w[j][1] * w[k][2]
-            dwt = _dweights(w, dw, i, j, k)
-            q = Ap @ ti.cast(off, float) - Afx
-            gvv = g.dot(vp) + gg[3]
-            sc += (m * gvv + dx * g.dot(q)) * dwt
-            wg = wt * g
-            sg += wg
-            sgo += wg.outer_product(ti.cast(off, float))
-            gm += wt * gvv
-            if obj:
-                gn = ngrid[I[0], I[1], I[2]]
-                gm += inv_dx * dwt.dot(gn)
-                sh += _hessian_vjp(w, dw, gn, i, j, k)
-        xg[s, p] = xg[s, p] + inv_dx * sc - Ap.transpose() @ sg + (m * inv_dx * inv_dx) * sh
-        vg[s, p] = (m * damp[p]) * sg
-        G = dx * (sgo - sg.outer_product(fx))  # d L / d A
-        g_C, g_F, g_ph, g_e, g_a = _stress_vjp(Cp, Fp, e, a, d, ph, G, Fg[s + 1, p], dx, dt,
-                                               p_vol, p_rho, nu, act_strength)
-        Cg[s, p] = g_C
-        Fg[s, p] = g_F
-        phig[p] = phig[p] + m_unit * gm + g_ph
-        Eg[p] = Eg[p] + g_e
-        actpg[p] = actpg[p] + g_a
+def _p2g_grad_kernel(multi: bool):
+    """:func:`p2g_grad` compiled for one value of ``multi`` (see
+    :func:`dbtool.sim.kernels._p2g_kernels`)."""
+    multi_ = multi
+
+    @ti.kernel
+    def p2g_grad(
+        x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(), damp: nd(),
+        field: nd(), ggrid: nd(), oggrid: nd(), ngrid: nd(),
+        xg: nd(), vg: nd(), Cg: nd(), Fg: nd(), phig: nd(), Eg: nd(), actpg: nd(),
+        s: ti.i32, n: ti.i32,
+        lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
+        dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
+        multi: ti.i32,
+    ):
+        """Adjoint of :func:`p2g` (scatter and stress): gather the node adjoints
+        ``ggrid = (dL/d mv, dL/d m)`` (``oggrid`` for an object particle with ``multi``, and the
+        adjoint ``ngrid`` of the object's mass gradient), then the constitutive adjoint by hand.
+        Writes the ``v``, ``C`` and ``F`` adjoints of substep ``s``, adds to its ``x`` adjoint and
+        accumulates the ``phi``, ``E`` and muscle-signal adjoints."""
+        lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+        for p in range(n):
+            inv_dx = 1.0 / dx
+            m_unit = p_rho * p_vol
+            xp = x[s, p]
+            base = _base(xp, inv_dx, lo, hi)
+            fx = xp * inv_dx - ti.cast(base, float)
+            w, dw = _weights(fx)
+            ph = phi[p]
+            e = E[p]
+            a = actp[p]
+            d = adir[p]
+            m = m_unit * ph
+            vp = damp[p] * v[s, p]  # the scattered velocity (momentum / m)
+            Cp = C[s, p]
+            Fp = F[s, p]
+            Fn = (ti.Matrix.identity(float, 3) + dt * Cp) @ Fp
+            tau = e * _tau_unit(Fn, Fn @ d, a, nu, act_strength)
+            Ap = (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * tau + (m_unit * ph) * Cp
+            obj = False
+            if ti.static(multi_):
+                obj = field[p] > 0.0
+            # dpos = (off - fx) dx, so A dpos = dx (A off - A fx) and every sum over the nodes of
+            # something times dpos splits into a sum with the constant offsets and one with fx.
+            Afx = Ap @ fx
+            sg = ti.Vector([0.0, 0.0, 0.0])  # sum w g
+            sgo = ti.Matrix.zero(float, 3, 3)  # sum w g (x) off
+            sc = ti.Vector([0.0, 0.0, 0.0])  # sum (dL/d w) dw/dfx
+            sh = ti.Vector([0.0, 0.0, 0.0])  # sum H^T gn (object mass gradient, second derivative)
+            gm = 0.0
+            for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
+                off = ti.Vector([i, j, k])
+                I = base + off
+                gg = ggrid[I[0], I[1], I[2]]
+                if ti.static(multi_):
+                    if obj:
+                        gg = oggrid[I[0], I[1], I[2]]
+                g = ti.Vector([gg[0], gg[1], gg[2]])
+                wt = w[i][0] * w[j][1] * w[k][2]
+                dwt = _dweights(w, dw, i, j, k)
+                q = Ap @ ti.cast(off, float) - Afx
+                gvv = g.dot(vp) + gg[3]
+                sc += (m * gvv + dx * g.dot(q)) * dwt
+                wg = wt * g
+                sg += wg
+                sgo += wg.outer_product(ti.cast(off, float))
+                gm += wt * gvv
+                if ti.static(multi_):
+                    if obj:
+                        gn = ngrid[I[0], I[1], I[2]]
+                        gm += inv_dx * dwt.dot(gn)
+                        sh += _hessian_vjp(w, dw, gn, i, j, k)
+            xg[s, p] = xg[s, p] + inv_dx * sc - Ap.transpose() @ sg + (m * inv_dx * inv_dx) * sh
+            vg[s, p] = (m * damp[p]) * sg
+            G = dx * (sgo - sg.outer_product(fx))  # d L / d A
+            g_C, g_F, g_ph, g_e, g_a = _stress_vjp(Cp, Fp, e, a, d, ph, G, Fg[s + 1, p], dx, dt,
+                                                   p_vol, p_rho, nu, act_strength)
+            Cg[s, p] = g_C
+            Fg[s, p] = g_F
+            phig[p] = phig[p] + m_unit * gm + g_ph
+            Eg[p] = Eg[p] + g_e
+            actpg[p] = actpg[p] + g_a
+
+    return p2g_grad
+
+
+p2g_grad = {m: _p2g_grad_kernel(m) for m in (False, True)}  # ``p2g_grad[multi]``
 
 
 @ti.func
@@ -292,8 +306,8 @@ def grid_op_grad(
 def _g2p_grad_particle(
     x: ti.template(), grid_v: ti.template(), glued: ti.template(), field: ti.template(),
     grid_ov: ti.template(), xg: ti.template(), vg: ti.template(), Cg: ti.template(),
-    gscratch: ti.template(), ogscratch: ti.template(), s, p, c, lo, hi, dx, dt, multi,
-    atomic: ti.template(),
+    gscratch: ti.template(), ogscratch: ti.template(), s, p, c, lo, hi, dx, dt,
+    multi: ti.template(), atomic: ti.template(),
 ):
     inv_dx = 1.0 / dx
     xp = x[s, p]
@@ -301,7 +315,9 @@ def _g2p_grad_particle(
     fx = xp * inv_dx - ti.cast(base, float)
     w, dw = _weights(fx)
     keep = 1.0 - glued[p]
-    obj = multi != 0 and field[p] > 0.0
+    obj = False
+    if ti.static(multi):
+        obj = field[p] > 0.0
     gx1 = xg[s + 1, p]
     gnv = keep * (vg[s + 1, p] + dt * gx1)
     gnC = keep * Cg[s + 1, p]
@@ -311,51 +327,66 @@ def _g2p_grad_particle(
         off = ti.Vector([i, j, k])
         I = base + off
         gv = grid_v[s, I[0], I[1], I[2]]
-        if obj:
-            gv = grid_ov[s, I[0], I[1], I[2]]
+        if ti.static(multi):
+            if obj:
+                gv = grid_ov[s, I[0], I[1], I[2]]
         wt = w[i][0] * w[j][1] * w[k][2]
         dwt = _dweights(w, dw, i, j, k)
         Cu = gnC @ (ti.cast(off, float) - fx)
         gfx += dwt * (gnv.dot(gv) + 4.0 * inv_dx * gv.dot(Cu))
         swg += wt * gv
         val = wt * (gnv + 4.0 * inv_dx * Cu)
-        if obj:
-            _scatter(ogscratch, c, I, val, atomic)
+        if ti.static(multi):
+            if obj:
+                _scatter(ogscratch, c, I, val, atomic)
+            else:
+                _scatter(gscratch, c, I, val, atomic)
         else:
             _scatter(gscratch, c, I, val, atomic)
     gfx -= (4.0 * inv_dx) * (gnC.transpose() @ swg)
     xg[s, p] = gx1 + inv_dx * gfx
 
 
-@ti.kernel
-def g2p_grad(
-    x: nd(), grid_v: nd(), glued: nd(), field: nd(), grid_ov: nd(), xg: nd(), vg: nd(),
-    Cg: nd(), gscratch: nd(), ogscratch: nd(), s: ti.i32, n: ti.i32, chunks: ti.i32,
-    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float,
-    dt: float, multi: ti.i32,
-):
-    """Adjoint of :func:`g2p`: particle adjoints at ``s`` and node velocity adjoints (an
-    object particle's into ``ogscratch`` with ``multi``)."""
-    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
-    for q in range(chunks * SPREAD):
-        if q % SPREAD != 0:
-            continue
-        c = q // SPREAD
-        a, b = _range(c, chunks, n)
-        for p in range(a, b):
+def _g2p_grad_kernels(multi: bool) -> tuple:
+    """:func:`g2p_grad` and :func:`g2p_grad_atomic` compiled for one value of ``multi``."""
+    multi_ = multi
+
+    @ti.kernel
+    def g2p_grad(
+        x: nd(), grid_v: nd(), glued: nd(), field: nd(), grid_ov: nd(), xg: nd(), vg: nd(),
+        Cg: nd(), gscratch: nd(), ogscratch: nd(), s: ti.i32, n: ti.i32, chunks: ti.i32,
+        lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float,
+        dt: float, multi: ti.i32,
+    ):
+        """Adjoint of :func:`g2p`: particle adjoints at ``s`` and node velocity adjoints (an
+        object particle's into ``ogscratch`` with ``multi``)."""
+        lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+        for q in range(chunks * SPREAD):
+            if q % SPREAD != 0:
+                continue
+            c = q // SPREAD
+            a, b = _range(c, chunks, n)
+            for p in range(a, b):
+                _g2p_grad_particle(x, grid_v, glued, field, grid_ov, xg, vg, Cg, gscratch,
+                                   ogscratch, s, p, c, lo, hi, dx, dt, multi_, False)
+
+
+    @ti.kernel
+    def g2p_grad_atomic(
+        x: nd(), grid_v: nd(), glued: nd(), field: nd(), grid_ov: nd(), xg: nd(), vg: nd(),
+        Cg: nd(), gscratch: nd(), ogscratch: nd(), s: ti.i32, n: ti.i32,
+        lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float,
+        dt: float, multi: ti.i32,
+    ):
+        """Massively parallel variant of :func:`g2p_grad` (GPU): atomic adds into one copy."""
+        lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+        for p in range(n):
             _g2p_grad_particle(x, grid_v, glued, field, grid_ov, xg, vg, Cg, gscratch,
-                               ogscratch, s, p, c, lo, hi, dx, dt, multi, False)
+                               ogscratch, s, p, 0, lo, hi, dx, dt, multi_, True)
+
+    return g2p_grad, g2p_grad_atomic
 
 
-@ti.kernel
-def g2p_grad_atomic(
-    x: nd(), grid_v: nd(), glued: nd(), field: nd(), grid_ov: nd(), xg: nd(), vg: nd(),
-    Cg: nd(), gscratch: nd(), ogscratch: nd(), s: ti.i32, n: ti.i32,
-    lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float,
-    dt: float, multi: ti.i32,
-):
-    """Massively parallel variant of :func:`g2p_grad` (GPU): atomic adds into one copy."""
-    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
-    for p in range(n):
-        _g2p_grad_particle(x, grid_v, glued, field, grid_ov, xg, vg, Cg, gscratch,
-                           ogscratch, s, p, 0, lo, hi, dx, dt, multi, True)
+# ``g2p_grad[multi]``, ``g2p_grad_atomic[multi]``
+g2p_grad, g2p_grad_atomic = ({m: _g2p_grad_kernels(m)[i] for m in (False, True)}
+                             for i in (0, 1))

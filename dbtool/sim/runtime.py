@@ -12,20 +12,23 @@ ARCHS = ("auto", "cpu", "cuda")
 PRECISIONS = ("f32", "f64")
 
 
-def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None) -> None:
+def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
+         profiler: bool = False) -> None:
     """Initialise Taichi once per (arch, precision); re-initialise only when they change or
     when ``threads`` is given and differs from the running count.
 
     ``arch``: ``cpu`` (default), ``cuda`` or ``auto`` (GPU when available). ``precision``: the
     floating-point type of every kernel and array (``f64`` is used by the gradient checks).
-    ``threads`` defaults to ``DBTOOL_THREADS`` or the CPU count.
+    ``threads`` defaults to ``DBTOOL_THREADS`` or the CPU count. ``profiler`` turns on
+    Taichi's kernel profiler (``benchmarks/sim_profile.py``).
     """
     if arch not in ARCHS:
         raise ValueError(f"unknown arch {arch!r}; choose one of {', '.join(ARCHS)}")
     if precision not in PRECISIONS:
         raise ValueError(f"unknown precision {precision!r}; choose one of {', '.join(PRECISIONS)}")
     key = (arch, precision)
-    if _STATE.get("key") == key and (threads is None or threads == _STATE.get("threads")):
+    if _STATE.get("key") == key and (threads is None or threads == _STATE.get("threads")) \
+            and not profiler:
         return
     if "key" in _STATE:
         ti.reset()
@@ -41,6 +44,7 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None) 
         arch=ti_arch,
         default_fp=ti.f64 if precision == "f64" else ti.f32,
         offline_cache=True,
+        kernel_profiler=profiler,
         log_level=os.environ.get("TI_LOG_LEVEL", "warn"),
         **kwargs,
     )

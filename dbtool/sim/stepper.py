@@ -62,8 +62,9 @@ class Stepper:
         self.consts = Constants(scene.dx, material.dt, p_vol, material.density, material.nu,
                                 material.act_strength)
         self.boxes = pool(dtype, (MAX_BOXES, 6))
-        self.bbox = pool(dtype, (2, 3))
-        self.stats = pool(dtype, (2,))
+        # bounds reduction: one row per CPU thread; on a GPU, rows of a few thousand particles
+        self.bound_chunks = 256 if atomic else chunks
+        self.bbox = pool(dtype, (self.bound_chunks, 8))
         if len(scene.boxes) > MAX_BOXES:
             raise ValueError(f"at most {MAX_BOXES} box colliders per scene")
         boxes = np.zeros((MAX_BOXES, 6), self.np_dtype)
@@ -87,12 +88,11 @@ class Stepper:
     def measure(self, s: int) -> tuple[np.ndarray, np.ndarray, float, int]:
         """Per-axis particle bounds, the largest speed component and the NaN count at slot
         ``s`` of the state."""
-        big = np.finfo(self.np_dtype).max
-        self.bbox.from_numpy(np.array([[big] * 3, [-big] * 3], self.np_dtype))
-        self.stats.from_numpy(np.zeros(2, self.np_dtype))
-        K.bounds(self.state.x, s, self.n, self.bbox, self.stats, self.state.v)
-        bb, st = self.bbox.to_numpy(), self.stats.to_numpy()
-        return bb[0], bb[1], float(st[0]), int(st[1])
+        big = float(np.finfo(self.np_dtype).max)
+        K.bounds(self.state.x, self.state.v, s, self.n, self.bound_chunks, big, self.bbox)
+        rows = self.bbox.to_numpy().astype(np.float64)
+        return (rows[:, :3].min(0), rows[:, 3:6].max(0), float(rows[:, 6].max()),
+                int(rows[:, 7].sum()))
 
     # ----------------------------------------------------------------- stepping
     def substep_calls(self, s: int, r: Region, last: bool = False) -> list[Call]:
@@ -100,19 +100,21 @@ class Stepper:
         (``last`` skips g2p)."""
         sc, m, st, g = self.scene, self.mat, self.state, self.grid
         multi, mu_c = g.multi, self.scene.object_friction or 0.0
+        obj = bool(multi)  # the kernel variant: with or without a task object's own field
         if self.atomic:
-            p2g = (K.p2g_atomic, (*st, *self.body.stress, *g.p2g, s, self.n, *r,
-                                  *self.consts, multi))
+            p2g = (K.p2g_atomic[obj], (*st, *self.body.stress, *g.p2g, s, self.n, *r,
+                                       *self.consts, multi))
         else:
-            p2g = (K.p2g, (*st, *self.body.stress, *g.p2g, s, self.n, self.chunks, *r,
-                           *self.consts, multi))
+            p2g = (K.p2g[obj], (*st, *self.body.stress, *g.p2g, s, self.n, self.chunks, *r,
+                                *self.consts, multi))
         calls = [p2g, (K.grid_op, (
             g.scratch, g.m, g.vin, g.v, self.boxes, g.clamp, *g.objects, s, self.chunks,
             *self.dims, *r, sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction, sc.damp(m.dt),
             multi, mu_c))]
         if not last:
-            calls.append((K.g2p, (st.x, st.v, st.C, g.v, self.body.glued, self.body.field,
-                                  g.ov, s, self.n, *r, sc.dx, m.dt, multi)))
+            calls.append((K.g2p[obj], (st.x, st.v, st.C, g.v, self.body.glued,
+                                       self.body.field, g.ov, s, self.n, *r, sc.dx, m.dt,
+                                       multi)))
         return calls
 
     def substep(self, s: int, r: Region, last: bool = False) -> None:

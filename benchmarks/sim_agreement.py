@@ -1,0 +1,140 @@
+"""Does a faster simulator compute the same thing? The reference bodies against older code.
+
+For each task and each reference body (box and sphere, the prescribed controller, 100 control
+steps, CPU, float32), one gradient episode gives the metric and d metric / d (occupancy,
+stiffness, actuator weights). It runs once with this checkout and once with an older commit
+(checked out into a temporary git worktree, imported first on ``PYTHONPATH``), each in a fresh
+process with the same thread count. Reported per body: whether metric and gradients are
+bit-identical, the metric's relative difference and the largest relative gradient difference
+(``max |g_new - g_old| / max |g_old|``).
+
+Usage::
+
+    python benchmarks/sim_agreement.py --against b592ad2
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_OUT = ROOT / "benchmarks" / "results" / "sim-agreement.json"
+SHAPES = ("box", "sphere")
+GRADS = ("phi", "E", "wact")
+
+
+def worker(out: Path, threads: int) -> None:
+    from dbtool.sim import runtime
+
+    runtime.init(arch="cpu", precision="f32", threads=threads)
+    from dbtool.robotize.actuators import reference_robot
+    from dbtool.sim.rollout import simulate
+    from dbtool.sim.tasks import TASKS, get_task
+
+    result = {}
+    for name in TASKS:
+        task = get_task(name)
+        for shape in SHAPES:
+            ro = simulate(task, reference_robot(task, shape).compact(), grad=True)
+            result[f"{name}/{shape}"] = {
+                "metric": float(ro.metric),
+                **{k: np.asarray(ro.grads[k], np.float64).ravel().tolist() for k in GRADS
+                   if k in ro.grads},
+            }
+    out.write_text(json.dumps(result))
+
+
+def run(code: Path, threads: int) -> dict[str, Any]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(code), env.get("PYTHONPATH")) if p)
+    env.setdefault("TI_LOG_LEVEL", "warn")
+    with tempfile.TemporaryDirectory(prefix="dbtool-agree-") as tmp:
+        out = Path(tmp) / "r.json"
+        proc = subprocess.run([sys.executable, __file__, "--worker", str(out),
+                               "--threads", str(threads)], env=env, cwd=code,
+                              capture_output=True, text=True)
+        if proc.returncode != 0 or not out.exists():
+            raise RuntimeError(f"worker failed:\n{(proc.stdout + proc.stderr)[-3000:]}")
+        return json.loads(out.read_text())
+
+
+def git(*args: str) -> str:
+    return subprocess.run(["git", *args], cwd=ROOT, check=True, capture_output=True,
+                          text=True).stdout.strip()
+
+
+def compare(new: dict, old: dict) -> list[dict[str, Any]]:
+    rows = []
+    for body, o in old.items():
+        n = new[body]
+        row: dict[str, Any] = {"body": body, "metric_new": n["metric"], "metric_old": o["metric"]}
+        row["metric_rel"] = abs(n["metric"] - o["metric"]) / max(abs(o["metric"]), 1e-30)
+        identical = n["metric"] == o["metric"]
+        worst = 0.0
+        for k in GRADS:
+            if k in o and k in n:
+                a, b = np.asarray(n[k]), np.asarray(o[k])
+                identical &= bool(np.array_equal(a, b))
+                worst = max(worst, float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-30)))
+        row["grad_rel"] = worst
+        row["bit_identical"] = bool(identical)
+        rows.append(row)
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--against", default="b592ad2", help="the older commit (default b592ad2)")
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    p.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+    if args.worker:
+        worker(args.worker, args.threads)
+        return 0
+    started = time.time()
+    commit = git("rev-parse", "--verify", f"{args.against}^{{commit}}")
+    tmp = Path(tempfile.mkdtemp(prefix="dbtool-agree-wt-"))
+    try:
+        git("worktree", "add", "--detach", str(tmp / "old"), commit)
+        old = run(tmp / "old", args.threads)
+    finally:
+        subprocess.run(["git", "worktree", "remove", "--force", str(tmp / "old")], cwd=ROOT,
+                       capture_output=True)
+        shutil.rmtree(tmp, ignore_errors=True)
+    new = run(ROOT, args.threads)
+    rows = compare(new, old)
+    lines = [f"This checkout against {commit[:7]} ({args.threads} threads, float32, gradient "
+             "episodes of 100 control steps):", "",
+             "| body | metric | bit-identical | metric rel. diff | gradient rel. diff |",
+             "|---|---:|---|---:|---:|"]
+    for r in rows:
+        lines.append(f"| {r['body']} | {r['metric_new']:.6g} | "
+                     f"{'yes' if r['bit_identical'] else 'no'} | {r['metric_rel']:.1e} | "
+                     f"{r['grad_rel']:.1e} |")
+    report = "\n".join(lines)
+    config = {"against": commit, "threads": args.threads, "shapes": list(SHAPES),
+              "grads": list(GRADS)}
+    result = {"benchmark": "dbtool.sim_agreement", "wall_s": time.time() - started,
+              "seed": None, "config": config, "rows": rows, "report": report}
+    sys.path.insert(0, str(Path(__file__).parent))
+    from _results import write_result
+
+    write_result(result, args.out, DEFAULT_OUT, False, config)
+    print(report)
+    return 0 if all(r["metric_rel"] <= 1e-6 for r in rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
