@@ -6,7 +6,8 @@ stiffness, actuator weights). It runs once with this checkout and once with an o
 (checked out into a temporary git worktree, imported first on ``PYTHONPATH``), each in a fresh
 process with the same thread count. Reported per body: whether metric and gradients are
 bit-identical, the metric's relative difference and the largest relative gradient difference
-(``max |g_new - g_old| / max |g_old|``).
+(``max |g_new - g_old| / max |g_old|``). The older commit's numbers are cached in
+``~/.cache/dbtool``.
 
 Usage::
 
@@ -31,7 +32,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "sim-agreement.json"
 SHAPES = ("box", "sphere")
-GRADS = ("phi", "E", "wact")
+CACHE = Path.home() / ".cache" / "dbtool"
+GRADS = ("occupancy", "stiffness", "actuators", "actions")
 
 
 def worker(out: Path, threads: int) -> None:
@@ -105,14 +107,21 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     started = time.time()
     commit = git("rev-parse", "--verify", f"{args.against}^{{commit}}")
-    tmp = Path(tempfile.mkdtemp(prefix="dbtool-agree-wt-"))
-    try:
-        git("worktree", "add", "--detach", str(tmp / "old"), commit)
-        old = run(tmp / "old", args.threads)
-    finally:
-        subprocess.run(["git", "worktree", "remove", "--force", str(tmp / "old")], cwd=ROOT,
-                       capture_output=True)
-        shutil.rmtree(tmp, ignore_errors=True)
+    # the old code's numbers do not change: kept outside the work tree after the first run
+    cache = CACHE / f"sim-agreement-{commit[:12]}-{args.threads}t.json"
+    if cache.exists():
+        old = json.loads(cache.read_text())
+    else:
+        tmp = Path(tempfile.mkdtemp(prefix="dbtool-agree-wt-"))
+        try:
+            git("worktree", "add", "--detach", str(tmp / "old"), commit)
+            old = run(tmp / "old", args.threads)
+        finally:
+            subprocess.run(["git", "worktree", "remove", "--force", str(tmp / "old")],
+                           cwd=ROOT, capture_output=True)
+            shutil.rmtree(tmp, ignore_errors=True)
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        cache.write_text(json.dumps(old))
     new = run(ROOT, args.threads)
     rows = compare(new, old)
     lines = [f"This checkout against {commit[:7]} ({args.threads} threads, float32, gradient "

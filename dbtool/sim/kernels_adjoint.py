@@ -17,6 +17,7 @@ from dbtool.sim.kernels import (
     _moduli,
     _range,
     _scatter,
+    _step,
     _tau_unit,
     _weights,
     nd,
@@ -129,35 +130,47 @@ def _p2g_grad_kernel(multi: bool):
             if ti.static(multi_):
                 obj = field[p] > 0.0
             # dpos = (off - fx) dx, so A dpos = dx (A off - A fx) and every sum over the nodes of
-            # something times dpos splits into a sum with the constant offsets and one with fx.
-            Afx = Ap @ fx
+            # something times dpos splits into a sum with the constant offsets and one with fx;
+            # A off = i A[:, 0] + j A[:, 1] + k A[:, 2] is built up along the loops.
+            a0 = ti.Vector([Ap[0, 0], Ap[1, 0], Ap[2, 0]])
+            a1 = ti.Vector([Ap[0, 1], Ap[1, 1], Ap[2, 1]])
+            a2 = ti.Vector([Ap[0, 2], Ap[1, 2], Ap[2, 2]])
+            q0 = -(Ap @ fx)
             sg = ti.Vector([0.0, 0.0, 0.0])  # sum w g
-            sgo = ti.Matrix.zero(float, 3, 3)  # sum w g (x) off
+            so0 = ti.Vector([0.0, 0.0, 0.0])  # columns of sum w g (x) off
+            so1 = ti.Vector([0.0, 0.0, 0.0])
+            so2 = ti.Vector([0.0, 0.0, 0.0])
             sc = ti.Vector([0.0, 0.0, 0.0])  # sum (dL/d w) dw/dfx
             sh = ti.Vector([0.0, 0.0, 0.0])  # sum H^T gn (object mass gradient, second derivative)
             gm = 0.0
-            for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-                off = ti.Vector([i, j, k])
-                I = base + off
-                gg = ggrid[I[0], I[1], I[2]]
-                if ti.static(multi_):
-                    if obj:
-                        gg = oggrid[I[0], I[1], I[2]]
-                g = ti.Vector([gg[0], gg[1], gg[2]])
-                wt = w[i][0] * w[j][1] * w[k][2]
-                dwt = _dweights(w, dw, i, j, k)
-                q = Ap @ ti.cast(off, float) - Afx
-                gvv = g.dot(vp) + gg[3]
-                sc += (m * gvv + dx * g.dot(q)) * dwt
-                wg = wt * g
-                sg += wg
-                sgo += wg.outer_product(ti.cast(off, float))
-                gm += wt * gvv
-                if ti.static(multi_):
-                    if obj:
-                        gn = ngrid[I[0], I[1], I[2]]
-                        gm += inv_dx * dwt.dot(gn)
-                        sh += _hessian_vjp(w, dw, gn, i, j, k)
+            for i in ti.static(range(3)):
+                qi = _step(q0, a0, i)
+                for j in ti.static(range(3)):
+                    qij = _step(qi, a1, j)
+                    for k in ti.static(range(3)):
+                        q = _step(qij, a2, k)
+                        I = base + ti.Vector([i, j, k])
+                        gg = ggrid[I[0], I[1], I[2]]
+                        if ti.static(multi_):
+                            if obj:
+                                gg = oggrid[I[0], I[1], I[2]]
+                        g = ti.Vector([gg[0], gg[1], gg[2]])
+                        wt = w[i][0] * w[j][1] * w[k][2]
+                        dwt = _dweights(w, dw, i, j, k)
+                        gvv = g.dot(vp) + gg[3]
+                        sc += (m * gvv + dx * g.dot(q)) * dwt
+                        wg = wt * g
+                        sg += wg
+                        so0 = _step(so0, wg, i)
+                        so1 = _step(so1, wg, j)
+                        so2 = _step(so2, wg, k)
+                        gm += wt * gvv
+                        if ti.static(multi_):
+                            if obj:
+                                gn = ngrid[I[0], I[1], I[2]]
+                                gm += inv_dx * dwt.dot(gn)
+                                sh += _hessian_vjp(w, dw, gn, i, j, k)
+            sgo = ti.Matrix.cols([so0, so1, so2])
             xg[s, p] = xg[s, p] + inv_dx * sc - Ap.transpose() @ sg + (m * inv_dx * inv_dx) * sh
             vg[s, p] = (m * damp[p]) * sg
             G = dx * (sgo - sg.outer_product(fx))  # d L / d A
@@ -321,29 +334,38 @@ def _g2p_grad_particle(
     gx1 = xg[s + 1, p]
     gnv = keep * (vg[s + 1, p] + dt * gx1)
     gnC = keep * Cg[s + 1, p]
+    # The node adjoint u = gnv + 4/dx gnC (off - fx) = u0 + i c0 + j c1 + k c2, built up along
+    # the loops; the fx adjoint of both g2p terms is dw . (v_node . u).
+    kC = (4.0 * inv_dx) * gnC
+    u0 = gnv - kC @ fx
+    c0 = ti.Vector([kC[0, 0], kC[1, 0], kC[2, 0]])
+    c1 = ti.Vector([kC[0, 1], kC[1, 1], kC[2, 1]])
+    c2 = ti.Vector([kC[0, 2], kC[1, 2], kC[2, 2]])
     gfx = ti.Vector([0.0, 0.0, 0.0])
     swg = ti.Vector([0.0, 0.0, 0.0])  # sum w v_node, for the -4/dx w gnC^T v_node term
-    for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-        off = ti.Vector([i, j, k])
-        I = base + off
-        gv = grid_v[s, I[0], I[1], I[2]]
-        if ti.static(multi):
-            if obj:
-                gv = grid_ov[s, I[0], I[1], I[2]]
-        wt = w[i][0] * w[j][1] * w[k][2]
-        dwt = _dweights(w, dw, i, j, k)
-        Cu = gnC @ (ti.cast(off, float) - fx)
-        gfx += dwt * (gnv.dot(gv) + 4.0 * inv_dx * gv.dot(Cu))
-        swg += wt * gv
-        val = wt * (gnv + 4.0 * inv_dx * Cu)
-        if ti.static(multi):
-            if obj:
-                _scatter(ogscratch, c, I, val, atomic)
-            else:
-                _scatter(gscratch, c, I, val, atomic)
-        else:
-            _scatter(gscratch, c, I, val, atomic)
-    gfx -= (4.0 * inv_dx) * (gnC.transpose() @ swg)
+    for i in ti.static(range(3)):
+        ui = _step(u0, c0, i)
+        for j in ti.static(range(3)):
+            uij = _step(ui, c1, j)
+            for k in ti.static(range(3)):
+                u = _step(uij, c2, k)
+                I = base + ti.Vector([i, j, k])
+                gv = grid_v[s, I[0], I[1], I[2]]
+                if ti.static(multi):
+                    if obj:
+                        gv = grid_ov[s, I[0], I[1], I[2]]
+                wt = w[i][0] * w[j][1] * w[k][2]
+                gfx += _dweights(w, dw, i, j, k) * gv.dot(u)
+                swg += wt * gv
+                val = wt * u
+                if ti.static(multi):
+                    if obj:
+                        _scatter(ogscratch, c, I, val, atomic)
+                    else:
+                        _scatter(gscratch, c, I, val, atomic)
+                else:
+                    _scatter(gscratch, c, I, val, atomic)
+    gfx -= kC.transpose() @ swg
     xg[s, p] = gx1 + inv_dx * gfx
 
 
