@@ -1,11 +1,13 @@
 """Does a faster simulator compute the same thing? The reference bodies against older code.
 
 For each task and each reference body (box and sphere, the prescribed controller, 100 control
-steps, CPU, float32), one gradient episode gives the metric and d metric / d (occupancy,
-stiffness, actuator weights). It runs once with this checkout and once with an older commit
+steps, CPU, float32), one episode gives the metric and the particle positions at every control
+step (with ``--grads``, a gradient episode also gives d metric / d occupancy, stiffness,
+actuator weights and actions). It runs once with this checkout and once with an older commit
 (checked out into a temporary git worktree, imported first on ``PYTHONPATH``), each in a fresh
 process with the same thread count. Reported per body: whether metric and gradients are
-bit-identical, the metric's relative difference and the largest relative gradient difference
+bit-identical, the metric's relative difference, the largest position difference over the
+episode (in grid cells) and, with ``--grads``, the largest relative gradient difference
 (``max |g_new - g_old| / max |g_old|``). The older commit's numbers are cached in
 ``~/.cache/dbtool``.
 
@@ -17,6 +19,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import shutil
@@ -36,7 +39,7 @@ CACHE = Path.home() / ".cache" / "dbtool"
 GRADS = ("occupancy", "stiffness", "actuators", "actions")
 
 
-def worker(out: Path, threads: int) -> None:
+def worker(out: Path, threads: int, grads: bool) -> None:
     from dbtool.sim import runtime
 
     runtime.init(arch="cpu", precision="f32", threads=threads)
@@ -48,23 +51,27 @@ def worker(out: Path, threads: int) -> None:
     for name in TASKS:
         task = get_task(name)
         for shape in SHAPES:
-            ro = simulate(task, reference_robot(task, shape).compact(), grad=True)
+            ro = simulate(task, reference_robot(task, shape).compact(), grad=grads)
+            pos = np.asarray(ro.positions, np.float64)
             result[f"{name}/{shape}"] = {
                 "metric": float(ro.metric),
+                "positions_sha": hashlib.sha256(np.ascontiguousarray(pos).tobytes()).hexdigest(),
+                "positions": pos[::10].ravel().tolist(),
                 **{k: np.asarray(ro.grads[k], np.float64).ravel().tolist() for k in GRADS
-                   if k in ro.grads},
+                   if grads and k in ro.grads},
             }
     out.write_text(json.dumps(result))
 
 
-def run(code: Path, threads: int) -> dict[str, Any]:
+def run(code: Path, threads: int, grads: bool) -> dict[str, Any]:
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(code), env.get("PYTHONPATH")) if p)
     env.setdefault("TI_LOG_LEVEL", "warn")
     with tempfile.TemporaryDirectory(prefix="dbtool-agree-") as tmp:
         out = Path(tmp) / "r.json"
         proc = subprocess.run([sys.executable, __file__, "--worker", str(out),
-                               "--threads", str(threads)], env=env, cwd=code,
+                               "--threads", str(threads)] + (["--grads"] if grads else []),
+                              env=env, cwd=code,
                               capture_output=True, text=True)
         if proc.returncode != 0 or not out.exists():
             raise RuntimeError(f"worker failed:\n{(proc.stdout + proc.stderr)[-3000:]}")
@@ -82,14 +89,16 @@ def compare(new: dict, old: dict) -> list[dict[str, Any]]:
         n = new[body]
         row: dict[str, Any] = {"body": body, "metric_new": n["metric"], "metric_old": o["metric"]}
         row["metric_rel"] = abs(n["metric"] - o["metric"]) / max(abs(o["metric"]), 1e-30)
-        identical = n["metric"] == o["metric"]
+        identical = n["metric"] == o["metric"] and n["positions_sha"] == o["positions_sha"]
+        dpos = np.abs(np.asarray(n["positions"]) - np.asarray(o["positions"])).max()
+        row["positions_max_diff_cells"] = float(dpos / 0.005)  # grid dx of every task
         worst = 0.0
         for k in GRADS:
             if k in o and k in n:
                 a, b = np.asarray(n[k]), np.asarray(o[k])
                 identical &= bool(np.array_equal(a, b))
                 worst = max(worst, float(np.abs(a - b).max() / max(np.abs(b).max(), 1e-30)))
-        row["grad_rel"] = worst
+        row["grad_rel"] = worst if any(k in o for k in GRADS) else None
         row["bit_identical"] = bool(identical)
         rows.append(row)
     return rows
@@ -99,41 +108,45 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--against", default="b592ad2", help="the older commit (default b592ad2)")
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--grads", action="store_true", help="gradient episodes (slower)")
     p.add_argument("--out", type=Path, default=DEFAULT_OUT)
     p.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.worker:
-        worker(args.worker, args.threads)
+        worker(args.worker, args.threads, args.grads)
         return 0
     started = time.time()
     commit = git("rev-parse", "--verify", f"{args.against}^{{commit}}")
     # the old code's numbers do not change: kept outside the work tree after the first run
-    cache = CACHE / f"sim-agreement-{commit[:12]}-{args.threads}t.json"
+    kind = "grads" if args.grads else "metrics"
+    cache = CACHE / f"sim-agreement-{commit[:12]}-{args.threads}t-{kind}.json"
     if cache.exists():
         old = json.loads(cache.read_text())
     else:
         tmp = Path(tempfile.mkdtemp(prefix="dbtool-agree-wt-"))
         try:
             git("worktree", "add", "--detach", str(tmp / "old"), commit)
-            old = run(tmp / "old", args.threads)
+            old = run(tmp / "old", args.threads, args.grads)
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(tmp / "old")],
                            cwd=ROOT, capture_output=True)
             shutil.rmtree(tmp, ignore_errors=True)
         cache.parent.mkdir(parents=True, exist_ok=True)
         cache.write_text(json.dumps(old))
-    new = run(ROOT, args.threads)
+    new = run(ROOT, args.threads, args.grads)
     rows = compare(new, old)
-    lines = [f"This checkout against {commit[:7]} ({args.threads} threads, float32, gradient "
-             "episodes of 100 control steps):", "",
-             "| body | metric | bit-identical | metric rel. diff | gradient rel. diff |",
-             "|---|---:|---|---:|---:|"]
+    lines = [f"This checkout against {commit[:7]} ({args.threads} threads, float32, "
+             f"{'gradient ' if args.grads else ''}episodes of 100 control steps):", "",
+             "| body | metric | bit-identical (metric, positions) | metric rel. diff | "
+             "positions max diff (cells) | gradient rel. diff |", "|---|---:|---|---:|---:|---:|"]
     for r in rows:
+        grad = "-" if r["grad_rel"] is None else f"{r['grad_rel']:.1e}"
         lines.append(f"| {r['body']} | {r['metric_new']:.6g} | "
                      f"{'yes' if r['bit_identical'] else 'no'} | {r['metric_rel']:.1e} | "
-                     f"{r['grad_rel']:.1e} |")
+                     f"{r['positions_max_diff_cells']:.1e} | {grad} |")
     report = "\n".join(lines)
-    config = {"against": commit, "threads": args.threads, "shapes": list(SHAPES),
+    config = {"against": commit, "threads": args.threads, "grads": args.grads,
+              "shapes": list(SHAPES),
               "grads": list(GRADS)}
     result = {"benchmark": "dbtool.sim_agreement", "wall_s": time.time() - started,
               "seed": None, "config": config, "rows": rows, "report": report}
