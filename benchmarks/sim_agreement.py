@@ -147,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     report = "\n".join(lines)
     config = {"against": commit, "threads": args.threads, "grads": args.grads,
               "shapes": list(SHAPES),
-              "grads": list(GRADS)}
+              "grad_fields": list(GRADS)}
     result = {"benchmark": "dbtool.sim_agreement", "wall_s": time.time() - started,
               "seed": None, "config": config, "rows": rows, "report": report}
     sys.path.insert(0, str(Path(__file__).parent))
