@@ -11,6 +11,10 @@ episode (in grid cells) and, with ``--grads``, the largest relative gradient dif
 (``max |g_new - g_old| / max |g_old|``). The older commit's numbers are cached in
 ``~/.cache/dbtool``.
 
+Both codes run twice: with Taichi's fast math (the default: LLVM may contract multiply-adds
+and reorder, which depends on how the kernels are laid out) and without (``TI_FAST_MATH=0``),
+where identical arithmetic gives identical bits.
+
 Usage::
 
     python benchmarks/sim_agreement.py --against b592ad2
@@ -63,8 +67,9 @@ def worker(out: Path, threads: int, grads: bool) -> None:
     out.write_text(json.dumps(result))
 
 
-def run(code: Path, threads: int, grads: bool) -> dict[str, Any]:
+def run(code: Path, threads: int, grads: bool, fast_math: bool) -> dict[str, Any]:
     env = dict(os.environ)
+    env["TI_FAST_MATH"] = "1" if fast_math else "0"  # ti.init reads TI_<OPTION> overrides
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(code), env.get("PYTHONPATH")) if p)
     env.setdefault("TI_LOG_LEVEL", "warn")
     with tempfile.TemporaryDirectory(prefix="dbtool-agree-") as tmp:
@@ -104,6 +109,38 @@ def compare(new: dict, old: dict) -> list[dict[str, Any]]:
     return rows
 
 
+def section(title: str, rows: list[dict], commit: str, args: argparse.Namespace) -> list[str]:
+    lines = [f"**{title}**: this checkout against {commit[:7]} ({args.threads} threads, "
+             f"float32, {'gradient ' if args.grads else ''}episodes of 100 control steps)", "",
+             "| body | metric | bit-identical (metric, positions) | metric rel. diff | "
+             "positions max diff (cells) | gradient rel. diff |", "|---|---:|---|---:|---:|---:|"]
+    for r in rows:
+        grad = "-" if r["grad_rel"] is None else f"{r['grad_rel']:.1e}"
+        lines.append(f"| {r['body']} | {r['metric_new']:.6g} | "
+                     f"{'yes' if r['bit_identical'] else 'no'} | {r['metric_rel']:.1e} | "
+                     f"{r['positions_max_diff_cells']:.1e} | {grad} |")
+    return lines + [""]
+
+
+def old_numbers(commit: str, args: argparse.Namespace, fast: bool) -> dict[str, Any]:
+    """The older commit's numbers, cached outside the work tree (they never change)."""
+    kind = "grads" if args.grads else "metrics"
+    cache = CACHE / f"sim-agreement-{commit[:12]}-{args.threads}t-{kind}-fm{int(fast)}.json"
+    if cache.exists():
+        return json.loads(cache.read_text())
+    tmp = Path(tempfile.mkdtemp(prefix="dbtool-agree-wt-"))
+    try:
+        git("worktree", "add", "--detach", str(tmp / "old"), commit)
+        old = run(tmp / "old", args.threads, args.grads, fast)
+    finally:
+        subprocess.run(["git", "worktree", "remove", "--force", str(tmp / "old")], cwd=ROOT,
+                       capture_output=True)
+        shutil.rmtree(tmp, ignore_errors=True)
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    cache.write_text(json.dumps(old))
+    return old
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--against", default="b592ad2", help="the older commit (default b592ad2)")
@@ -117,45 +154,24 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     started = time.time()
     commit = git("rev-parse", "--verify", f"{args.against}^{{commit}}")
-    # the old code's numbers do not change: kept outside the work tree after the first run
-    kind = "grads" if args.grads else "metrics"
-    cache = CACHE / f"sim-agreement-{commit[:12]}-{args.threads}t-{kind}.json"
-    if cache.exists():
-        old = json.loads(cache.read_text())
-    else:
-        tmp = Path(tempfile.mkdtemp(prefix="dbtool-agree-wt-"))
-        try:
-            git("worktree", "add", "--detach", str(tmp / "old"), commit)
-            old = run(tmp / "old", args.threads, args.grads)
-        finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(tmp / "old")],
-                           cwd=ROOT, capture_output=True)
-            shutil.rmtree(tmp, ignore_errors=True)
-        cache.parent.mkdir(parents=True, exist_ok=True)
-        cache.write_text(json.dumps(old))
-    new = run(ROOT, args.threads, args.grads)
-    rows = compare(new, old)
-    lines = [f"This checkout against {commit[:7]} ({args.threads} threads, float32, "
-             f"{'gradient ' if args.grads else ''}episodes of 100 control steps):", "",
-             "| body | metric | bit-identical (metric, positions) | metric rel. diff | "
-             "positions max diff (cells) | gradient rel. diff |", "|---|---:|---|---:|---:|---:|"]
-    for r in rows:
-        grad = "-" if r["grad_rel"] is None else f"{r['grad_rel']:.1e}"
-        lines.append(f"| {r['body']} | {r['metric_new']:.6g} | "
-                     f"{'yes' if r['bit_identical'] else 'no'} | {r['metric_rel']:.1e} | "
-                     f"{r['positions_max_diff_cells']:.1e} | {grad} |")
+    modes = {"fast math (default)": True, "fast math off (TI_FAST_MATH=0)": False}
+    sections: dict[str, list[dict]] = {}
+    lines: list[str] = []
+    for title, fast in modes.items():
+        rows = compare(run(ROOT, args.threads, args.grads, fast), old_numbers(commit, args, fast))
+        sections[title] = rows
+        lines += section(title, rows, commit, args)
     report = "\n".join(lines)
     config = {"against": commit, "threads": args.threads, "grads": args.grads,
-              "shapes": list(SHAPES),
-              "grad_fields": list(GRADS)}
+              "shapes": list(SHAPES), "grad_fields": list(GRADS)}
     result = {"benchmark": "dbtool.sim_agreement", "wall_s": time.time() - started,
-              "seed": None, "config": config, "rows": rows, "report": report}
+              "seed": None, "config": config, "sections": sections, "report": report}
     sys.path.insert(0, str(Path(__file__).parent))
     from _results import write_result
 
     write_result(result, args.out, DEFAULT_OUT, False, config)
     print(report)
-    return 0 if all(r["metric_rel"] <= 1e-6 for r in rows) else 1
+    return 0 if all(r["metric_rel"] <= 1e-6 for r in sections[next(iter(modes))]) else 1
 
 
 if __name__ == "__main__":
