@@ -17,6 +17,19 @@ if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1:
         os.environ.setdefault(_var, "1")
 
 
+# Files whose tests pytest-xdist may spread over the workers one by one; every other file's
+# tests stay on one worker together (``--dist loadgroup``), so its module fixtures and caches
+# are built once.
+SPREAD = {"test_fuzz"}
+
+
+def pytest_collection_modifyitems(items):
+    for item in items:
+        name = item.module.__name__.rsplit(".", 1)[-1]
+        if name not in SPREAD:
+            item.add_marker(pytest.mark.xdist_group(name))
+
+
 @pytest.fixture(autouse=True, scope="module")
 def taichi_precision(request):
     """The module's ``PRECISION`` (default f32) for its tests, f32 again afterwards."""
