@@ -111,7 +111,7 @@ def render(result: dict[str, Any]) -> str:
                       f"stage ({verdict})."]
     versions = result.get("versions") or []
     if versions:
-        cur = versions[-1]["speed"]
+        cur = versions[-1]["speed"]  # this checkout, measured in the same rounds
         lines += ["", "The same workload on older commits, in the same run (each version's faster "
                   "of two interleaved rounds):", "",
                   "| code | particles | forward M/s | fwd+bwd M/s | bwd/fwd | this checkout's "

@@ -25,7 +25,7 @@ second run, in a fresh subprocess whose Taichi offline cache is an empty tempora
 option) -> "cold"; then again in a second fresh subprocess with the now populated cache ->
 "warm cache".
 
-``--compare REF ...`` also times older commits on the same workload in the same run: each
+``--compare REF ...`` also times older commits on the 20k workload in the same run: each
 is checked out into a temporary git worktree and the speed worker runs with that checkout's
 ``dbtool`` first on ``PYTHONPATH``. The versions alternate (two rounds, the second in reverse
 order) and each keeps its faster round, so slow drifts of the machine hit all of them.
@@ -455,8 +455,10 @@ def main(argv: list[str] | None = None) -> int:
             log(f"memory: {side ** 3} particles, T={args.mem_steps}")
             memory.append(spawn("memory", ["--side", str(side), "--steps", str(args.mem_steps)],
                                 args.threads))
-    versions = measure_versions(args.compare, sides, args.steps, args.repeats, args.threads,
-                                log) if args.compare else []
+    # the older commits at the goal size only (20k particles), each in two rounds
+    goal_side = min(sides, key=lambda sd: abs(sd ** 3 - 20000))
+    versions = measure_versions(args.compare, [goal_side], args.steps, args.repeats,
+                                args.threads, log) if args.compare else []
 
     result: dict[str, Any] = {
         "benchmark": "dbtool.sim",
