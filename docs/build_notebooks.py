@@ -26,8 +26,14 @@ ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = ROOT / "notebooks"
 OUT_DIR = ROOT / "docs" / "notebooks"
 CELL_TIMEOUT_S = 1200
-# Quick-mode run times (s, one thread, this machine's CPU), only to start the longest first.
-EXPECTED_S: dict[str, float] = {}
+# Quick-mode run times (s, one thread each, two at a time on the 2-core CI machine kind), only
+# to start the longest first.
+EXPECTED_S: dict[str, float] = {
+    "fig16_sim_vs_real": 463, "fig05_motion_montage": 228, "table_main": 228,
+    "fig14_fabrication": 128, "fig12_baselines": 106, "fig13_text_feedback": 103,
+    "fig04_embedding_optimisation": 102, "fig08_robotizing": 98, "fig11_diffusion_process": 46,
+    "fig03_tasks": 35,
+}
 
 
 def notebook_sources(names: list[str] | None = None) -> list[Path]:
