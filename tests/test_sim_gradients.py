@@ -136,11 +136,10 @@ def test_gradient_episodes_are_bit_reproducible():
     kernel's atomic adds differed by rel. 1e-5 on gripping, enough for co-design to diverge)."""
     task = get_task("gripping")
     robot = reference_robot(task, "box").compact()
-    runs = [simulate(task, robot, grad=True, n_steps=30) for _ in range(3)]
-    for ro in runs[1:]:
-        for key in ("actions", "occupancy", "actuators"):
-            np.testing.assert_array_equal(ro.grads[key], runs[0].grads[key], err_msg=key)
-    assert np.abs(runs[0].grads["actions"]).max() > 0
+    a, b = (simulate(task, robot, grad=True, n_steps=20) for _ in range(2))
+    for key in ("actions", "occupancy", "actuators"):
+        np.testing.assert_array_equal(b.grads[key], a.grads[key], err_msg=key)
+    assert np.abs(a.grads["actions"]).max() > 0
 
 
 def test_gradients_with_damping_and_a_loss_read_along_the_episode():

@@ -27,7 +27,7 @@ def _substep_adjoint(sp: Stepper, adj: Adjoint, s: int, r: Region) -> list[Call]
     obj = bool(multi)  # the kernel variant: with or without a task object's own field
     g2p_args = (st.x, g.v, b.glued, b.field, g.ov, adj.x, adj.v, adj.C, adj.scratch,
                 adj.oscratch, s, n)
-    tail = (*r, sc.dx, m.dt, multi)
+    tail = (*sp.dims, *r, sc.dx, m.dt, multi)
     if sp.atomic:
         g2p = (KA.g2p_grad_atomic[obj], (*g2p_args, *tail))
     else:
@@ -37,7 +37,7 @@ def _substep_adjoint(sp: Stepper, adj: Adjoint, s: int, r: Region) -> list[Call]
         g.o0, g.gm, g.og, adj.ogrid, adj.ngrid, s, sp.chunks, *sp.dims, *r, sc.dx, m.dt,
         sc.gravity, sc.ground_y, sc.friction, sc.damp(m.dt), multi, mu_c)),
         (KA.p2g_grad[obj], (*st, *b.stress, adj.grid, adj.ogrid, adj.ngrid, *adj.p2g, s, n,
-                            *r, *sp.consts, multi))]
+                            *sp.dims, *r, *sp.consts, multi))]
 
 
 def _seed(adj: Adjoint, slot: int, g: np.ndarray) -> None:

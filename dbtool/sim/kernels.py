@@ -28,8 +28,13 @@ A substep is ``stress -> p2g -> grid_op -> g2p``:
 
 The arguments come in a fixed order, built by the containers of :mod:`dbtool.sim.state`:
 particle state ``(x, v, C, F)``, body fields ``(phi, E, actp, adir)``, grid arrays, the slot
-``s`` and particle count ``n``, the region ``lx, ly, lz, hx, hy, hz`` and the constants of
-:class:`~dbtool.sim.state.Constants`.
+``s`` and particle count ``n``, the grid size ``nx, ny, nz``, the region
+``lx, ly, lz, hx, hy, hz`` and the constants of :class:`~dbtool.sim.state.Constants`.
+
+Grid arrays are flat: node ``(i, j, k)`` of grid copy (or substep) ``c`` is element
+``c nx ny nz + (i ny + j) nz + k`` (:func:`_node`). The kernels compute a particle's first
+stencil node once and reach the other 26 by constant offsets; indexing a 4-D ndarray
+re-derived the whole address at every access, which made the transfers 1.6x slower.
 """
 
 import taichi as ti
@@ -58,6 +63,12 @@ def _base(xp, inv_dx, lo, hi):
     """Lower stencil node of a particle, clamped to the active region (NaN-safe indexing)."""
     base = ti.cast(xp * inv_dx - 0.5, ti.i32)
     return ti.max(ti.min(base, hi - 3), lo)
+
+
+@ti.func
+def _node(c, i, j, k, ny, nz, nxyz):
+    """Flat index of node ``(i, j, k)`` of grid copy or substep ``c`` (see the module doc)."""
+    return c * nxyz + (i * ny + j) * nz + k
 
 
 @ti.func
@@ -124,12 +135,13 @@ def actuation(wact: nd(), act: nd(), actp: nd(), t: ti.i32, n: ti.i32):
 
 # --------------------------------------------------------------------------- p2g
 @ti.func
-def _scatter(arr: ti.template(), c, I, val, atomic: ti.template()):
-    """Add ``val`` to node ``I`` of grid copy ``c`` (atomic on the GPU, plain on the CPU)."""
+def _scatter(arr: ti.template(), o, val, atomic: ti.template()):
+    """Add ``val`` to flat element ``o`` of a grid array (atomic on the GPU, plain on the
+    CPU, where each thread has its own grid copy)."""
     if ti.static(atomic):
-        arr[c, I[0], I[1], I[2]] += val
+        arr[o] += val
     else:
-        arr[c, I[0], I[1], I[2]] = arr[c, I[0], I[1], I[2]] + val
+        arr[o] = arr[o] + val
 
 
 @ti.func
@@ -144,8 +156,8 @@ def _p2g_particle(
     x: ti.template(), v: ti.template(), C: ti.template(), F: ti.template(), phi: ti.template(),
     E: ti.template(), actp: ti.template(), adir: ti.template(), damp: ti.template(),
     field: ti.template(), scratch: ti.template(), oscratch: ti.template(),
-    nscratch: ti.template(), xscratch: ti.template(), s, p, c, lo, hi, dx, dt, p_vol, p_rho, nu,
-    act_strength, multi: ti.template(), atomic: ti.template(),
+    nscratch: ti.template(), xscratch: ti.template(), s, p, c, ny, nz, nxyz, lo, hi, dx, dt,
+    p_vol, p_rho, nu, act_strength, multi: ti.template(), atomic: ti.template(),
 ):
     Ap = _stress(C, F, phi, E, actp, adir, s, p, dx, dt, p_vol, p_rho, nu, act_strength)
     m_unit = p_rho * p_vol
@@ -159,6 +171,7 @@ def _p2g_particle(
     obj = False
     if ti.static(multi):
         obj = field[p] > 0.0
+    b = _node(c, base[0], base[1], base[2], ny, nz, nxyz)
     # The momentum keeps the arithmetic of the plain stencil, w (mv + A ((off - fx) dx)):
     # building it up along the loops (q0 + i a0 + ...) was 25% faster but moved the tasks'
     # metrics by up to 1.4e-5 relative (float32 round-off, amplified over 1,700 substeps).
@@ -169,19 +182,19 @@ def _p2g_particle(
                 wt = w[i][0] * w[j][1] * w[k][2]
                 mom = wt * (mv + Ap @ ((ti.cast(off, float) - fx) * dx))
                 val = ti.Vector([mom[0], mom[1], mom[2], wt * m])
-                I = base + off
+                o = b + _node(0, i, j, k, ny, nz, nxyz)
                 if ti.static(multi):
                     if obj:
-                        _scatter(oscratch, c, I, val, atomic)
+                        _scatter(oscratch, o, val, atomic)
                         gw = (m * inv_dx) * _dweights(w, dw, i, j, k)
                         mx = (wt * m) * xp
-                        _scatter(nscratch, c, I,
+                        _scatter(nscratch, o,
                                  ti.Vector([gw[0], gw[1], gw[2], mx[0], mx[1], mx[2]]), atomic)
                     else:
-                        _scatter(scratch, c, I, val, atomic)
-                        _scatter(xscratch, c, I, (wt * m) * xp, atomic)
+                        _scatter(scratch, o, val, atomic)
+                        _scatter(xscratch, o, (wt * m) * xp, atomic)
                 else:
-                    _scatter(scratch, c, I, val, atomic)
+                    _scatter(scratch, o, val, atomic)
 
 
 def _p2g_kernels(multi: bool) -> tuple:
@@ -194,9 +207,9 @@ def _p2g_kernels(multi: bool) -> tuple:
     def p2g(
         x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
         damp: nd(), field: nd(), scratch: nd(), oscratch: nd(), nscratch: nd(), xscratch: nd(),
-        s: ti.i32, n: ti.i32, chunks: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32,
-        hy: ti.i32, hz: ti.i32, dx: float, dt: float, p_vol: float, p_rho: float, nu: float,
-        act_strength: float, multi: ti.i32,
+        s: ti.i32, n: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32, lx: ti.i32,
+        ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, dt: float,
+        p_vol: float, p_rho: float, nu: float, act_strength: float, multi: ti.i32,
     ):
         """Stress, then scatter of mass and APIC momentum; ``chunks`` particle ranges go into
         separate grid copies with plain adds (one range per CPU thread). With ``multi`` the
@@ -211,23 +224,23 @@ def _p2g_kernels(multi: bool) -> tuple:
             a, b = _range(c, chunks, n)
             for p in range(a, b):
                 _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, field, scratch, oscratch,
-                              nscratch, xscratch, s, p, c, lo, hi, dx, dt, p_vol, p_rho, nu,
-                              act_strength, multi_, False)
+                              nscratch, xscratch, s, p, c, ny, nz, nx * ny * nz, lo, hi, dx, dt,
+                              p_vol, p_rho, nu, act_strength, multi_, False)
 
     @ti.kernel
     def p2g_atomic(
         x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
         damp: nd(), field: nd(), scratch: nd(), oscratch: nd(), nscratch: nd(), xscratch: nd(),
-        s: ti.i32, n: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32,
-        hz: ti.i32, dx: float, dt: float, p_vol: float, p_rho: float, nu: float,
-        act_strength: float, multi: ti.i32,
+        s: ti.i32, n: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32, lx: ti.i32, ly: ti.i32,
+        lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, dt: float, p_vol: float,
+        p_rho: float, nu: float, act_strength: float, multi: ti.i32,
     ):
         """Massively parallel variant of :func:`p2g` (GPU): one grid copy, atomic adds."""
         lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
         for p in range(n):
             _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, field, scratch, oscratch,
-                          nscratch, xscratch, s, p, 0, lo, hi, dx, dt, p_vol, p_rho, nu,
-                          act_strength, multi_, True)
+                          nscratch, xscratch, s, p, 0, ny, nz, nx * ny * nz, lo, hi, dx, dt,
+                          p_vol, p_rho, nu, act_strength, multi_, True)
 
     return p2g, p2g_atomic
 
@@ -258,10 +271,13 @@ def grid_op(
     object's ground acts only where its particles are within ``GROUND_GAP`` of it
     (``grid_og``: the ground height used at each node, -1 for none)."""
     for i, j, k in ti.ndrange((lx, hx), (ly, hy), (lz, hz)):
+        nxyz = nx * ny * nz
+        o = _node(0, i, j, k, ny, nz, nxyz)  # this node in copy / substep 0
+        on = o + s * nxyz  # ... in substep s
         acc = ti.Vector([0.0, 0.0, 0.0, 0.0])
         for c in range(chunks):
-            acc += scratch[c, i, j, k]
-            scratch[c, i, j, k] = ti.Vector([0.0, 0.0, 0.0, 0.0])
+            acc += scratch[o + c * nxyz]
+            scratch[o + c * nxyz] = ti.Vector([0.0, 0.0, 0.0, 0.0])
         m = acc[3]
         I = ti.Vector([i, j, k])
         dims = ti.Vector([nx, ny, nz])
@@ -275,19 +291,20 @@ def grid_op(
             nacc = ti.Vector([0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
             rx = ti.Vector([0.0, 0.0, 0.0])
             for c in range(chunks):
-                oacc += oscratch[c, i, j, k]
-                nacc += nscratch[c, i, j, k]
-                rx += xscratch[c, i, j, k]
-                oscratch[c, i, j, k] = ti.Vector([0.0, 0.0, 0.0, 0.0])
-                nscratch[c, i, j, k] = ti.Vector([0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-                xscratch[c, i, j, k] = ti.Vector([0.0, 0.0, 0.0])
+                oc = o + c * nxyz
+                oacc += oscratch[oc]
+                nacc += nscratch[oc]
+                rx += xscratch[oc]
+                oscratch[oc] = ti.Vector([0.0, 0.0, 0.0, 0.0])
+                nscratch[oc] = ti.Vector([0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+                xscratch[oc] = ti.Vector([0.0, 0.0, 0.0])
             mo = oacc[3]
             gm = ti.Vector([nacc[0], nacc[1], nacc[2]])
             ox = ti.Vector([nacc[3], nacc[4], nacc[5]])
             oground = -1.0  # the object's ground: none unless it is within GROUND_GAP
             if mo > 0.0 and ox[1] / mo - ground_y < GROUND_GAP * dx:
                 oground = ground_y
-            grid_og[s, i, j, k] = oground
+            grid_og[on] = oground
             if m > 0.0 and mo > 0.0:
                 nrm, _ln = _contact_normal(gm)
                 if (rx / m - ox / mo).dot(nrm) >= CONTACT_GAP * dx:
@@ -297,21 +314,21 @@ def grid_op(
             if mo > 0.0:
                 vo = ti.Vector([oacc[0], oacc[1], oacc[2]]) / mo * damp
                 vo[1] -= dt * gravity
-            grid_r0[s, i, j, k] = vin
-            grid_o0[s, i, j, k] = vo
-            grid_gm[s, i, j, k] = gm
+            grid_r0[on] = vin
+            grid_o0[on] = vo
+            grid_gm[on] = gm
             if m > 0.0 and mo > 0.0:
                 vin, vo = _contact(vin, m, vo, mo, gm, mu_c)
             if mo > 0.0:
                 voout = _boundary(I, vo, boxes, oground, mu_f, dims, dx, 0.0)
-            grid_om[s, i, j, k] = mo
-            grid_ovin[s, i, j, k] = vo
-            grid_ov[s, i, j, k] = voout
+            grid_om[on] = mo
+            grid_ovin[on] = vo
+            grid_ov[on] = voout
         if m > 0.0:
-            vout = _boundary(I, vin, boxes, ground_y, mu_f, dims, dx, clamp[i, j, k])
-        grid_m[s, i, j, k] = m
-        grid_vin[s, i, j, k] = vin
-        grid_v[s, i, j, k] = vout
+            vout = _boundary(I, vin, boxes, ground_y, mu_f, dims, dx, clamp[o])
+        grid_m[on] = m
+        grid_vin[on] = vin
+        grid_v[on] = vout
 
 
 # --------------------------------------------------------------------------- g2p
@@ -322,8 +339,8 @@ def _g2p_kernel(multi: bool):
     @ti.kernel
     def g2p(
         x: nd(), v: nd(), C: nd(), grid_v: nd(), glued: nd(), field: nd(), grid_ov: nd(),
-        s: ti.i32, n: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32,
-        hz: ti.i32, dx: float, dt: float, multi: ti.i32,
+        s: ti.i32, n: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32, lx: ti.i32, ly: ti.i32,
+        lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, dt: float, multi: ti.i32,
     ):
         """Gather APIC velocity and affine matrix, then advect (glued particles stay put);
         with ``multi`` the object particles gather from their own field ``grid_ov``."""
@@ -339,12 +356,14 @@ def _g2p_kernel(multi: bool):
                 obj = field[p] > 0.0
             new_v = ti.Vector([0.0, 0.0, 0.0])
             new_C = ti.Matrix.zero(float, 3, 3)
+            b = _node(s, base[0], base[1], base[2], ny, nz, nx * ny * nz)
             for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
                 off = ti.Vector([i, j, k])
-                gv = grid_v[s, base[0] + i, base[1] + j, base[2] + k]
+                o = b + _node(0, i, j, k, ny, nz, 0)
+                gv = grid_v[o]
                 if ti.static(multi_):
                     if obj:
-                        gv = grid_ov[s, base[0] + i, base[1] + j, base[2] + k]
+                        gv = grid_ov[o]
                 wt = w[i][0] * w[j][1] * w[k][2]
                 new_v += wt * gv
                 new_C += (4.0 * inv_dx * wt) * gv.outer_product(ti.cast(off, float) - fx)

@@ -15,6 +15,7 @@ from dbtool.sim.kernels import (
     _base,
     _dweights,
     _moduli,
+    _node,
     _range,
     _scatter,
     _step,
@@ -97,7 +98,7 @@ def _p2g_grad_kernel(multi: bool):
         x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(), damp: nd(),
         field: nd(), ggrid: nd(), oggrid: nd(), ngrid: nd(),
         xg: nd(), vg: nd(), Cg: nd(), Fg: nd(), phig: nd(), Eg: nd(), actpg: nd(),
-        s: ti.i32, n: ti.i32,
+        s: ti.i32, n: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
         lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
         dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
         multi: ti.i32,
@@ -143,17 +144,18 @@ def _p2g_grad_kernel(multi: bool):
             sc = ti.Vector([0.0, 0.0, 0.0])  # sum (dL/d w) dw/dfx
             sh = ti.Vector([0.0, 0.0, 0.0])  # sum H^T gn (object mass gradient, second derivative)
             gm = 0.0
+            b = _node(0, base[0], base[1], base[2], ny, nz, 0)
             for i in ti.static(range(3)):
                 qi = _step(q0, a0, i)
                 for j in ti.static(range(3)):
                     qij = _step(qi, a1, j)
                     for k in ti.static(range(3)):
                         q = _step(qij, a2, k)
-                        I = base + ti.Vector([i, j, k])
-                        gg = ggrid[I[0], I[1], I[2]]
+                        o = b + _node(0, i, j, k, ny, nz, 0)
+                        gg = ggrid[o]
                         if ti.static(multi_):
                             if obj:
-                                gg = oggrid[I[0], I[1], I[2]]
+                                gg = oggrid[o]
                         g = ti.Vector([gg[0], gg[1], gg[2]])
                         wt = w[i][0] * w[j][1] * w[k][2]
                         dwt = _dweights(w, dw, i, j, k)
@@ -167,7 +169,7 @@ def _p2g_grad_kernel(multi: bool):
                         gm += wt * gvv
                         if ti.static(multi_):
                             if obj:
-                                gn = ngrid[I[0], I[1], I[2]]
+                                gn = ngrid[o]
                                 gm += inv_dx * dwt.dot(gn)
                                 sh += _hessian_vjp(w, dw, gn, i, j, k)
             sgo = ti.Matrix.cols([so0, so1, so2])
@@ -274,52 +276,55 @@ def grid_op_grad(
     with ``multi`` the object field's ``oggrid`` and the adjoint ``ngrid`` of its mass
     gradient, through the contact)."""
     for i, j, k in ti.ndrange((lx, hx), (ly, hy), (lz, hz)):
+        nxyz = nx * ny * nz
+        o = _node(0, i, j, k, ny, nz, nxyz)  # this node in copy / substep 0
+        on = o + s * nxyz  # ... in substep s
         g = ti.Vector([0.0, 0.0, 0.0])
         for c in range(chunks):
-            g += gscratch[c, i, j, k]
-            gscratch[c, i, j, k] = ti.Vector([0.0, 0.0, 0.0])
-        m = grid_m[s, i, j, k]
+            g += gscratch[o + c * nxyz]
+            gscratch[o + c * nxyz] = ti.Vector([0.0, 0.0, 0.0])
+        m = grid_m[on]
         I = ti.Vector([i, j, k])
         dims = ti.Vector([nx, ny, nz])
         if m > 0.0:
-            g = _boundary_vjp(I, grid_vin[s, i, j, k], g, boxes, ground_y, mu_f, dims, dx,
-                              clamp[i, j, k])
-        vr = grid_vin[s, i, j, k]
+            g = _boundary_vjp(I, grid_vin[on], g, boxes, ground_y, mu_f, dims, dx,
+                              clamp[o])
+        vr = grid_vin[on]
         gmr = 0.0
         if multi != 0:
             go = ti.Vector([0.0, 0.0, 0.0])
             for c in range(chunks):
-                go += ogscratch[c, i, j, k]
-                ogscratch[c, i, j, k] = ti.Vector([0.0, 0.0, 0.0])
-            mo = grid_om[s, i, j, k]
+                go += ogscratch[o + c * nxyz]
+                ogscratch[o + c * nxyz] = ti.Vector([0.0, 0.0, 0.0])
+            mo = grid_om[on]
             if mo > 0.0:
-                go = _boundary_vjp(I, grid_ovin[s, i, j, k], go, boxes, grid_og[s, i, j, k],
+                go = _boundary_vjp(I, grid_ovin[on], go, boxes, grid_og[on],
                                    mu_f, dims, dx, 0.0)
-            vr = grid_r0[s, i, j, k]
-            vo = grid_o0[s, i, j, k]
+            vr = grid_r0[on]
+            vo = grid_o0[on]
             ggm = ti.Vector([0.0, 0.0, 0.0])
             gmo = 0.0
             if m > 0.0 and mo > 0.0:
-                g, gmr, go, gmo, ggm = _contact_vjp(vr, m, vo, mo, grid_gm[s, i, j, k], mu_c,
+                g, gmr, go, gmo, ggm = _contact_vjp(vr, m, vo, mo, grid_gm[on], mu_c,
                                                     g, go)
             oout = ti.Vector([0.0, 0.0, 0.0, 0.0])
             if mo > 0.0:
                 oout = _update_vjp(vo, mo, go, dt, gravity, damp)
                 oout[3] += gmo
-            oggrid[i, j, k] = oout
-            ngrid[i, j, k] = ggm
+            oggrid[o] = oout
+            ngrid[o] = ggm
         out = ti.Vector([0.0, 0.0, 0.0, 0.0])
         if m > 0.0:
             out = _update_vjp(vr, m, g, dt, gravity, damp)
             out[3] += gmr
-        ggrid[i, j, k] = out
+        ggrid[o] = out
 
 
 @ti.func
 def _g2p_grad_particle(
     x: ti.template(), grid_v: ti.template(), glued: ti.template(), field: ti.template(),
     grid_ov: ti.template(), xg: ti.template(), vg: ti.template(), Cg: ti.template(),
-    gscratch: ti.template(), ogscratch: ti.template(), s, p, c, lo, hi, dx, dt,
+    gscratch: ti.template(), ogscratch: ti.template(), s, p, c, ny, nz, nxyz, lo, hi, dx, dt,
     multi: ti.template(), atomic: ti.template(),
 ):
     inv_dx = 1.0 / dx
@@ -343,28 +348,30 @@ def _g2p_grad_particle(
     c2 = ti.Vector([kC[0, 2], kC[1, 2], kC[2, 2]])
     gfx = ti.Vector([0.0, 0.0, 0.0])
     swg = ti.Vector([0.0, 0.0, 0.0])  # sum w v_node, for the -4/dx w gnC^T v_node term
+    b = _node(0, base[0], base[1], base[2], ny, nz, nxyz)  # the first stencil node
+    bs, bc = b + s * nxyz, b + c * nxyz  # ... in substep s and in grid copy c
     for i in ti.static(range(3)):
         ui = _step(u0, c0, i)
         for j in ti.static(range(3)):
             uij = _step(ui, c1, j)
             for k in ti.static(range(3)):
                 u = _step(uij, c2, k)
-                I = base + ti.Vector([i, j, k])
-                gv = grid_v[s, I[0], I[1], I[2]]
+                o = _node(0, i, j, k, ny, nz, nxyz)
+                gv = grid_v[bs + o]
                 if ti.static(multi):
                     if obj:
-                        gv = grid_ov[s, I[0], I[1], I[2]]
+                        gv = grid_ov[bs + o]
                 wt = w[i][0] * w[j][1] * w[k][2]
                 gfx += _dweights(w, dw, i, j, k) * gv.dot(u)
                 swg += wt * gv
                 val = wt * u
                 if ti.static(multi):
                     if obj:
-                        _scatter(ogscratch, c, I, val, atomic)
+                        _scatter(ogscratch, bc + o, val, atomic)
                     else:
-                        _scatter(gscratch, c, I, val, atomic)
+                        _scatter(gscratch, bc + o, val, atomic)
                 else:
-                    _scatter(gscratch, c, I, val, atomic)
+                    _scatter(gscratch, bc + o, val, atomic)
     gfx -= kC.transpose() @ swg
     xg[s, p] = gx1 + inv_dx * gfx
 
@@ -377,8 +384,8 @@ def _g2p_grad_kernels(multi: bool) -> tuple:
     def g2p_grad(
         x: nd(), grid_v: nd(), glued: nd(), field: nd(), grid_ov: nd(), xg: nd(), vg: nd(),
         Cg: nd(), gscratch: nd(), ogscratch: nd(), s: ti.i32, n: ti.i32, chunks: ti.i32,
-        lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float,
-        dt: float, multi: ti.i32,
+        nx: ti.i32, ny: ti.i32, nz: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32,
+        hy: ti.i32, hz: ti.i32, dx: float, dt: float, multi: ti.i32,
     ):
         """Adjoint of :func:`g2p`: particle adjoints at ``s`` and node velocity adjoints (an
         object particle's into ``ogscratch`` with ``multi``)."""
@@ -390,21 +397,23 @@ def _g2p_grad_kernels(multi: bool) -> tuple:
             a, b = _range(c, chunks, n)
             for p in range(a, b):
                 _g2p_grad_particle(x, grid_v, glued, field, grid_ov, xg, vg, Cg, gscratch,
-                                   ogscratch, s, p, c, lo, hi, dx, dt, multi_, False)
+                                   ogscratch, s, p, c, ny, nz, nx * ny * nz, lo, hi, dx, dt,
+                                   multi_, False)
 
 
     @ti.kernel
     def g2p_grad_atomic(
         x: nd(), grid_v: nd(), glued: nd(), field: nd(), grid_ov: nd(), xg: nd(), vg: nd(),
         Cg: nd(), gscratch: nd(), ogscratch: nd(), s: ti.i32, n: ti.i32,
-        lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float,
-        dt: float, multi: ti.i32,
+        nx: ti.i32, ny: ti.i32, nz: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32,
+        hy: ti.i32, hz: ti.i32, dx: float, dt: float, multi: ti.i32,
     ):
         """Massively parallel variant of :func:`g2p_grad` (GPU): atomic adds into one copy."""
         lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
         for p in range(n):
             _g2p_grad_particle(x, grid_v, glued, field, grid_ov, xg, vg, Cg, gscratch,
-                               ogscratch, s, p, 0, lo, hi, dx, dt, multi_, True)
+                               ogscratch, s, p, 0, ny, nz, nx * ny * nz, lo, hi, dx, dt,
+                               multi_, True)
 
     return g2p_grad, g2p_grad_atomic
 

@@ -96,7 +96,7 @@ class Simulator:
             b.field.from_numpy((np.asarray(p.field) > 0).astype(f))
         if np.any(np.asarray(p.glued) > 0):
             self.grid.clamp.from_numpy(
-                clamp_nodes(p.x0, p.glued, self.scene.dx, self.scene.grid).astype(f))
+                clamp_nodes(p.x0, p.glued, self.scene.dx, self.scene.grid).astype(f).ravel())
 
     def set_particle_fields(self, phi=None, E=None, wact=None) -> None:
         """Replace occupancy, stiffness or actuator weights without re-allocating."""

@@ -7,7 +7,8 @@ order: a kernel call unpacks the groups it needs, e.g. ``p2g(*state, *body.stres
 * :class:`State`: the particle state slabs ``x, v, C, F``; slot ``k`` is substep ``k`` of the
   current control step, or control step ``k`` for the checkpoints.
 * :class:`Body`: per-particle fields (occupancy, stiffness, actuators) and the actuation.
-* :class:`Grid`: the p2g copies and the per-substep grid of the current control step.
+* :class:`Grid`: the p2g copies and the per-substep grid of the current control step, each a
+  flat array (:func:`flat`).
 * :class:`Adjoint`: the adjoint arrays of the hand-written backward kernels.
 * :class:`Constants`: the scalar constants every transfer kernel takes, in order.
 """
@@ -17,6 +18,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from dataclasses import astuple, dataclass
 
+import numpy as np
 import taichi as ti
 
 from dbtool.sim import kernels as K
@@ -113,6 +115,12 @@ class Body:
         return self.phi, self.E, self.actp, self.adir, self.damp, self.field
 
 
+def flat(lead: int, dims: tuple[int, ...]) -> tuple[int]:
+    """Shape of a flat grid array holding ``lead`` grids of ``dims`` nodes (grid copies or
+    substeps; node order of :func:`dbtool.sim.kernels._node`)."""
+    return (lead * int(np.prod(dims)),)
+
+
 @dataclass
 class Grid:
     """``scratch``: one p2g grid copy per chunk (mass-weighted momentum and mass); ``m``,
@@ -149,16 +157,16 @@ class Grid:
                  substeps: int, multi: bool = False) -> Grid:
         v3, _, v4 = _types(dtype)
         v6 = ti.types.vector(6, dtype)
-        scratch = pool(v4, (chunks, *dims))
+        scratch = pool(v4, flat(chunks, dims))
         scratch.fill(0)
-        shape = (substeps, *dims)
-        clamp = pool(dtype, dims)
+        shape = flat(substeps, dims)
+        clamp = pool(dtype, flat(1, dims))
         clamp.fill(0)
-        odims = dims if multi else (1, 1, 1)
-        oshape = shape if multi else (1, 1, 1, 1)
-        oscratch = pool(v4, (chunks, *odims))
-        nscratch = pool(v6, (chunks, *odims))
-        xscratch = pool(v3, (chunks, *odims))
+        oshape = shape if multi else (1,)
+        ochunks = flat(chunks, dims) if multi else (1,)
+        oscratch = pool(v4, ochunks)
+        nscratch = pool(v6, ochunks)
+        xscratch = pool(v3, ochunks)
         for a in (oscratch, nscratch, xscratch):
             a.fill(0)
         return cls(scratch, pool(dtype, shape), pool(v3, shape), pool(v3, shape), clamp,
@@ -204,14 +212,14 @@ class Adjoint:
                  dims: tuple[int, ...], chunks: int, multi: bool = False) -> Adjoint:
         v3, _, v4 = _types(dtype)
         slots, n = state.x.shape
-        scratch = pool(v3, (chunks, *dims))
+        scratch = pool(v3, flat(chunks, dims))
         scratch.fill(0)
-        odims = dims if multi else (1, 1, 1)
-        oscratch = pool(v3, (chunks, *odims))
+        nodes = flat(1, dims) if multi else (1,)
+        oscratch = pool(v3, flat(chunks, dims) if multi else (1,))
         oscratch.fill(0)
         return cls(pool(v3, (slots, n)), pool(v3, (slots, n)), state.C.grad, state.F.grad,
-                   body.phi.grad, body.E.grad, body.actp.grad, scratch, pool(v4, dims),
-                   oscratch, pool(v4, odims), pool(v3, odims))
+                   body.phi.grad, body.E.grad, body.actp.grad, scratch, pool(v4, flat(1, dims)),
+                   oscratch, pool(v4, nodes), pool(v3, nodes))
 
     @property
     def state(self) -> State:

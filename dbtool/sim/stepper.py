@@ -102,19 +102,19 @@ class Stepper:
         multi, mu_c = g.multi, self.scene.object_friction or 0.0
         obj = bool(multi)  # the kernel variant: with or without a task object's own field
         if self.atomic:
-            p2g = (K.p2g_atomic[obj], (*st, *self.body.stress, *g.p2g, s, self.n, *r,
-                                       *self.consts, multi))
+            p2g = (K.p2g_atomic[obj], (*st, *self.body.stress, *g.p2g, s, self.n, *self.dims,
+                                       *r, *self.consts, multi))
         else:
-            p2g = (K.p2g[obj], (*st, *self.body.stress, *g.p2g, s, self.n, self.chunks, *r,
-                                *self.consts, multi))
+            p2g = (K.p2g[obj], (*st, *self.body.stress, *g.p2g, s, self.n, self.chunks,
+                                *self.dims, *r, *self.consts, multi))
         calls = [p2g, (K.grid_op, (
             g.scratch, g.m, g.vin, g.v, self.boxes, g.clamp, *g.objects, s, self.chunks,
             *self.dims, *r, sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction, sc.damp(m.dt),
             multi, mu_c))]
         if not last:
             calls.append((K.g2p[obj], (st.x, st.v, st.C, g.v, self.body.glued,
-                                       self.body.field, g.ov, s, self.n, *r, sc.dx, m.dt,
-                                       multi)))
+                                       self.body.field, g.ov, s, self.n, *self.dims, *r,
+                                       sc.dx, m.dt, multi)))
         return calls
 
     def substep(self, s: int, r: Region, last: bool = False) -> None:
