@@ -23,11 +23,13 @@ if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1:
 SPREAD = {"test_fuzz"}
 
 
-def pytest_collection_modifyitems(items):
-    for item in items:
-        name = item.module.__name__.rsplit(".", 1)[-1]
-        if name not in SPREAD:
-            item.add_marker(pytest.mark.xdist_group(name))
+def pytest_itemcollected(item):
+    """Mark each test with its file's group as it is collected: pytest-xdist turns the marks
+    into the node ids it schedules by in its own ``pytest_collection_modifyitems``, which ran
+    before one here (the marks came too late and every file was spread over both workers)."""
+    name = item.module.__name__.rsplit(".", 1)[-1]
+    if name not in SPREAD:
+        item.add_marker(pytest.mark.xdist_group(name))
 
 
 @pytest.fixture(autouse=True, scope="module")
