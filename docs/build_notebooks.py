@@ -147,8 +147,11 @@ def main(argv: list[str] | None = None) -> int:
               f"({time.perf_counter() - t0:.1f} s)", flush=True)
 
     order = sorted(sources, key=lambda p: -EXPECTED_S.get(p.stem, 0.0))
+    start = time.perf_counter()
     with ThreadPoolExecutor(max_workers=jobs) as pool:
         list(pool.map(run, order))
+    print(f"{len(sources) - len(failed)} of {len(sources)} notebook(s) executed in "
+          f"{time.perf_counter() - start:.0f} s")
     return 1 if failed else 0
 
 
