@@ -15,7 +15,10 @@ Both codes run twice: with Taichi's fast math (the default: LLVM may contract mu
 and reorder, which depends on how the kernels are laid out) and without (``TI_FAST_MATH=0``),
 where identical arithmetic gives identical bits. A third table sets each code with fast math
 against itself without it: how far fast math alone moves a metric, the floor below which two
-fast-math builds cannot be expected to agree.
+fast-math builds cannot be expected to agree. A last run in float64 (fast math off) tells
+whether the two codes compute the same physics where the arithmetic was reordered: float32
+round-off grows past 1e-6 relative over an episode of 1,700 substeps, float64's does not; the
+exit status is 0 when every float64 metric agrees to 1e-6 relative.
 
 Usage::
 
@@ -45,10 +48,10 @@ CACHE = Path.home() / ".cache" / "dbtool"
 GRADS = ("occupancy", "stiffness", "actuators", "actions")
 
 
-def worker(out: Path, threads: int, grads: bool) -> None:
+def worker(out: Path, threads: int, grads: bool, precision: str) -> None:
     from dbtool.sim import runtime
 
-    runtime.init(arch="cpu", precision="f32", threads=threads)
+    runtime.init(arch="cpu", precision=precision, threads=threads)
     from dbtool.robotize.actuators import reference_robot
     from dbtool.sim.rollout import simulate
     from dbtool.sim.tasks import TASKS, get_task
@@ -69,7 +72,8 @@ def worker(out: Path, threads: int, grads: bool) -> None:
     out.write_text(json.dumps(result))
 
 
-def run(code: Path, threads: int, grads: bool, fast_math: bool) -> dict[str, Any]:
+def run(code: Path, threads: int, grads: bool, fast_math: bool,
+        precision: str = "f32") -> dict[str, Any]:
     env = dict(os.environ)
     env["TI_FAST_MATH"] = "1" if fast_math else "0"  # ti.init reads TI_<OPTION> overrides
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(code), env.get("PYTHONPATH")) if p)
@@ -77,7 +81,8 @@ def run(code: Path, threads: int, grads: bool, fast_math: bool) -> dict[str, Any
     with tempfile.TemporaryDirectory(prefix="dbtool-agree-") as tmp:
         out = Path(tmp) / "r.json"
         proc = subprocess.run([sys.executable, __file__, "--worker", str(out),
-                               "--threads", str(threads)] + (["--grads"] if grads else []),
+                               "--threads", str(threads), "--precision", precision]
+                              + (["--grads"] if grads else []),
                               env=env, cwd=code,
                               capture_output=True, text=True)
         if proc.returncode != 0 or not out.exists():
@@ -111,9 +116,11 @@ def compare(new: dict, old: dict) -> list[dict[str, Any]]:
     return rows
 
 
-def section(title: str, rows: list[dict], commit: str, args: argparse.Namespace) -> list[str]:
+def section(title: str, rows: list[dict], commit: str, args: argparse.Namespace,
+            precision: str) -> list[str]:
+    kind = {"f32": "float32", "f64": "float64"}[precision]
     lines = [f"**{title}**: this checkout against {commit[:7]} ({args.threads} threads, "
-             f"float32, {'gradient ' if args.grads else ''}episodes of 100 control steps)", "",
+             f"{kind}, {'gradient ' if args.grads else ''}episodes of 100 control steps)", "",
              "| body | metric | bit-identical (metric, positions) | metric rel. diff | "
              "positions max diff (cells) | gradient rel. diff |", "|---|---:|---|---:|---:|---:|"]
     for r in rows:
@@ -124,16 +131,18 @@ def section(title: str, rows: list[dict], commit: str, args: argparse.Namespace)
     return lines + [""]
 
 
-def old_numbers(commit: str, args: argparse.Namespace, fast: bool) -> dict[str, Any]:
+def old_numbers(commit: str, args: argparse.Namespace, fast: bool,
+                precision: str) -> dict[str, Any]:
     """The older commit's numbers, cached outside the work tree (they never change)."""
     kind = "grads" if args.grads else "metrics"
-    cache = CACHE / f"sim-agreement-{commit[:12]}-{args.threads}t-{kind}-fm{int(fast)}.json"
+    tag = "" if precision == "f32" else f"-{precision}"
+    cache = CACHE / f"sim-agreement-{commit[:12]}-{args.threads}t-{kind}-fm{int(fast)}{tag}.json"
     if cache.exists():
         return json.loads(cache.read_text())
     tmp = Path(tempfile.mkdtemp(prefix="dbtool-agree-wt-"))
     try:
         git("worktree", "add", "--detach", str(tmp / "old"), commit)
-        old = run(tmp / "old", args.threads, args.grads, fast)
+        old = run(tmp / "old", args.threads, args.grads, fast, precision)
     finally:
         subprocess.run(["git", "worktree", "remove", "--force", str(tmp / "old")], cwd=ROOT,
                        capture_output=True)
@@ -149,26 +158,30 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--grads", action="store_true", help="gradient episodes (slower)")
     p.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    p.add_argument("--precision", default="f32", help=argparse.SUPPRESS)  # the worker's
     p.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.worker:
-        worker(args.worker, args.threads, args.grads)
+        worker(args.worker, args.threads, args.grads, args.precision)
         return 0
     started = time.time()
     commit = git("rev-parse", "--verify", f"{args.against}^{{commit}}")
-    modes = {"fast math (default)": True, "fast math off (TI_FAST_MATH=0)": False}
+    modes = {"fast math (default)": (True, "f32"),
+             "fast math off (TI_FAST_MATH=0)": (False, "f32"),
+             "float64 (fast math off)": (False, "f64")}
     sections: dict[str, list[dict]] = {}
     lines: list[str] = []
-    new: dict[bool, dict] = {}
-    old: dict[bool, dict] = {}
-    for title, fast in modes.items():
-        new[fast], old[fast] = run(ROOT, args.threads, args.grads, fast), \
-            old_numbers(commit, args, fast)
-        rows = compare(new[fast], old[fast])
+    new: dict[tuple, dict] = {}
+    old: dict[tuple, dict] = {}
+    for title, mode in modes.items():
+        new[mode], old[mode] = run(ROOT, args.threads, args.grads, *mode), \
+            old_numbers(commit, args, *mode)
+        rows = compare(new[mode], old[mode])
         sections[title] = rows
-        lines += section(title, rows, commit, args)
+        lines += section(title, rows, commit, args, mode[1])
     # The floor fast math sets: each code with fast math against its own exact arithmetic.
-    floor = {"this": compare(new[True], new[False]), "older": compare(old[True], old[False])}
+    fm, exact = modes["fast math (default)"], modes["fast math off (TI_FAST_MATH=0)"]
+    floor = {"this": compare(new[fm], new[exact]), "older": compare(old[fm], old[exact])}
     sections["fast math against the same code without it"] = [
         {"body": a["body"], "metric_rel_this": a["metric_rel"], "metric_rel_older": b["metric_rel"],
          "positions_max_diff_cells_this": a["positions_max_diff_cells"],
@@ -192,7 +205,9 @@ def main(argv: list[str] | None = None) -> int:
 
     write_result(result, args.out, DEFAULT_OUT, False, config)
     print(report)
-    return 0 if all(r["metric_rel"] <= 1e-6 for r in sections[next(iter(modes))]) else 1
+    # Same physics: the metrics agree to 1e-6 in float64, where a changed order of operations
+    # moves them by round-off (float32's is amplified past 1e-6 over an episode, see above).
+    return 0 if all(r["metric_rel"] <= 1e-6 for r in sections["float64 (fast math off)"]) else 1
 
 
 if __name__ == "__main__":

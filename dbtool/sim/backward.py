@@ -42,9 +42,10 @@ def _substep_adjoint(sp: Stepper, adj: Adjoint, s: int, r: Region) -> list[Call]
 
 def _seed(adj: Adjoint, slot: int, g: np.ndarray) -> None:
     """Add ``g`` to the position adjoint of substep ``slot``."""
-    x = adj.x.to_numpy()
-    x[slot] += g.astype(x.dtype)
-    adj.x.from_numpy(x)
+    x = _slot(adj, adj.x, slot)
+    x += g.astype(x.dtype)
+    adj.seed.from_numpy(x)
+    K.put_slot(adj.seed, adj.x, slot, adj.seed.shape[0])
 
 
 def backward(sp: Stepper, checkpoints: State, adj: Adjoint, regions: Sequence[Region],
@@ -60,16 +61,13 @@ def backward(sp: Stepper, checkpoints: State, adj: Adjoint, regions: Sequence[Re
     S, n, f, body = sp.substeps, sp.n, sp.np_dtype, sp.body
     for a in (body.phi, body.E, body.wact, body.act):
         a.grad.fill(0)
-    seed_x = np.zeros((S + 1, n, 3), f)
     steps = dict(grad_x_steps or {})
-    seed_x[S] = grad_x + steps.pop(len(regions), 0.0)
-    seed_v = np.zeros((S + 1, n, 3), f)
-    if grad_v is not None:
-        seed_v[S] = grad_v
-    adj.x.from_numpy(seed_x)
-    adj.v.from_numpy(seed_v)
-    adj.C.fill(0)
-    adj.F.fill(0)
+    # Only slot S is read before it is written: zero it, then seed x and v there.
+    K.zero_slot(*adj.state, S, n)
+    for arr, seed in ((adj.x, grad_x + steps.pop(len(regions), 0.0)), (adj.v, grad_v)):
+        if seed is not None:
+            adj.seed.from_numpy(np.broadcast_to(seed, (n, 3)).astype(f))
+            K.put_slot(adj.seed, arr, S, n)
     wact = body.wact.to_numpy().astype(np.float64)
     g_act = np.zeros(body.act.shape, np.float64)
     n_steps = len(regions)
@@ -98,6 +96,12 @@ def backward(sp: Stepper, checkpoints: State, adj: Adjoint, regions: Sequence[Re
         "E": adj.E.to_numpy(),
         "wact": body.wact.grad.to_numpy(),
         "actions": g_act.astype(f),
-        "x0": adj.x.to_numpy()[0],
-        "v0": adj.v.to_numpy()[0],
+        "x0": _slot(adj, adj.x, 0),
+        "v0": _slot(adj, adj.v, 0),
     }
+
+
+def _slot(adj: Adjoint, slab, slot: int) -> np.ndarray:
+    """One slot of an adjoint slab, read through the staging array (not the whole slab)."""
+    K.take_slot(slab, adj.seed, slot, adj.seed.shape[0])
+    return adj.seed.to_numpy()

@@ -172,15 +172,20 @@ def _p2g_particle(
     if ti.static(multi):
         obj = field[p] > 0.0
     b = _node(c, base[0], base[1], base[2], ny, nz, nxyz)
-    # The momentum keeps the arithmetic of the plain stencil, w (mv + A ((off - fx) dx)):
-    # building it up along the loops (q0 + i a0 + ...) was 25% faster but moved the tasks'
-    # metrics by up to 1.4e-5 relative (float32 round-off, amplified over 1,700 substeps).
+    # The node momentum w (mv + A (off - fx) dx) is built up along the loops: with
+    # q0 = mv - dx A fx and the columns a_d = dx A[:, d], it is w (q0 + i a0 + j a1 + k a2).
+    q0 = mv - dx * (Ap @ fx)
+    a0 = dx * ti.Vector([Ap[0, 0], Ap[1, 0], Ap[2, 0]])
+    a1 = dx * ti.Vector([Ap[0, 1], Ap[1, 1], Ap[2, 1]])
+    a2 = dx * ti.Vector([Ap[0, 2], Ap[1, 2], Ap[2, 2]])
     for i in ti.static(range(3)):
+        qi = _step(q0, a0, i)
         for j in ti.static(range(3)):
+            qij = _step(qi, a1, j)
+            wij = w[i][0] * w[j][1]
             for k in ti.static(range(3)):
-                off = ti.Vector([i, j, k])
-                wt = w[i][0] * w[j][1] * w[k][2]
-                mom = wt * (mv + Ap @ ((ti.cast(off, float) - fx) * dx))
+                wt = wij * w[k][2]
+                mom = wt * _step(qij, a2, k)
                 val = ti.Vector([mom[0], mom[1], mom[2], wt * m])
                 o = b + _node(0, i, j, k, ny, nz, nxyz)
                 if ti.static(multi):
@@ -354,19 +359,28 @@ def _g2p_kernel(multi: bool):
             obj = False
             if ti.static(multi_):
                 obj = field[p] > 0.0
+            # C = 4/dx^2 sum w v (off - fx)^T dx = 4/dx (sum w v off^T - new_v fx^T); the
+            # columns of sum w v off^T (so0, so1, so2) are built up along the loops.
             new_v = ti.Vector([0.0, 0.0, 0.0])
-            new_C = ti.Matrix.zero(float, 3, 3)
+            so0 = ti.Vector([0.0, 0.0, 0.0])
+            so1 = ti.Vector([0.0, 0.0, 0.0])
+            so2 = ti.Vector([0.0, 0.0, 0.0])
             b = _node(s, base[0], base[1], base[2], ny, nz, nx * ny * nz)
-            for i, j, k in ti.static(ti.ndrange(3, 3, 3)):
-                off = ti.Vector([i, j, k])
-                o = b + _node(0, i, j, k, ny, nz, 0)
-                gv = grid_v[o]
-                if ti.static(multi_):
-                    if obj:
-                        gv = grid_ov[o]
-                wt = w[i][0] * w[j][1] * w[k][2]
-                new_v += wt * gv
-                new_C += (4.0 * inv_dx * wt) * gv.outer_product(ti.cast(off, float) - fx)
+            for i in ti.static(range(3)):
+                for j in ti.static(range(3)):
+                    wij = w[i][0] * w[j][1]
+                    for k in ti.static(range(3)):
+                        o = b + _node(0, i, j, k, ny, nz, 0)
+                        gv = grid_v[o]
+                        if ti.static(multi_):
+                            if obj:
+                                gv = grid_ov[o]
+                        wg = (wij * w[k][2]) * gv
+                        new_v += wg
+                        so0 = _step(so0, wg, i)
+                        so1 = _step(so1, wg, j)
+                        so2 = _step(so2, wg, k)
+            new_C = (4.0 * inv_dx) * (ti.Matrix.cols([so0, so1, so2]) - new_v.outer_product(fx))
             keep = 1.0 - glued[p]
             v[s + 1, p] = keep * new_v
             C[s + 1, p] = keep * new_C
@@ -390,6 +404,30 @@ def copy_state(
         v2[dst, p] = v[src, p]
         C2[dst, p] = C[src, p]
         F2[dst, p] = F[src, p]
+
+
+@ti.kernel
+def put_slot(a: nd(), out: nd(), dst: ti.i32, n: ti.i32):
+    """``out[dst] = a``: one slot of a slab from a per-particle array (the backward seed)."""
+    for p in range(n):
+        out[dst, p] = a[p]
+
+
+@ti.kernel
+def take_slot(a: nd(), out: nd(), src: ti.i32, n: ti.i32):
+    """``out = a[src]``: one slot of a slab into a per-particle array."""
+    for p in range(n):
+        out[p] = a[src, p]
+
+
+@ti.kernel
+def zero_slot(x: nd(), v: nd(), C: nd(), F: nd(), dst: ti.i32, n: ti.i32):
+    """``(x, v, C, F)[dst] = 0``."""
+    for p in range(n):
+        x[dst, p] = ti.Vector([0.0, 0.0, 0.0])
+        v[dst, p] = ti.Vector([0.0, 0.0, 0.0])
+        C[dst, p] = ti.Matrix.zero(float, 3, 3)
+        F[dst, p] = ti.Matrix.zero(float, 3, 3)
 
 
 @ti.kernel

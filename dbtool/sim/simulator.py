@@ -60,6 +60,7 @@ class Simulator:
         self.state = State.allocate(pool, dtype, n, substeps + 1, grad=g)
         self.checkpoints = State.allocate(pool, dtype, n, n_steps + 1 if g else 1,
                                           x_slots=n_steps + 1)
+        self.start = State.allocate(pool, dtype, n, 1)  # the initial state, uploaded once
         self.body = Body.allocate(pool, dtype, n, n_steps, g)
         self.multi = multi = scene.object_friction is not None and particles.field is not None \
             and bool(np.any(np.asarray(particles.field) > 0))
@@ -92,6 +93,8 @@ class Simulator:
         b.glued.from_numpy(np.asarray(p.glued, f))
         rate = np.zeros(self.n) if p.damping is None else np.asarray(p.damping, float)
         b.damp.from_numpy(np.exp(-rate * self.mat.dt).astype(f))
+        self.start.C.from_numpy(np.zeros((1, self.n, 3, 3), f))
+        self.start.F.from_numpy(np.broadcast_to(np.eye(3, dtype=f), (1, self.n, 3, 3)).copy())
         if self.multi:
             b.field.from_numpy((np.asarray(p.field) > 0).astype(f))
         if np.any(np.asarray(p.glued) > 0):
@@ -121,17 +124,12 @@ class Simulator:
 
     # ----------------------------------------------------------------- forward
     def _initial_state(self) -> None:
-        S, n, f = self.substeps, self.n, self.np_dtype
-        x = np.zeros((S + 1, n, 3), f)
-        x[0] = self.p.x0
-        v = np.zeros((S + 1, n, 3), f)
-        v[0] = self.p.v0 * (1.0 - self.p.glued[:, None])
-        F = np.zeros((S + 1, n, 3, 3), f)
-        F[0] = np.eye(3)
-        self.state.x.from_numpy(x)
-        self.state.v.from_numpy(v)
-        self.state.C.from_numpy(np.zeros((S + 1, n, 3, 3), f))
-        self.state.F.from_numpy(F)
+        """Slot 0 of the substep slab: the particles' ``x0``, ``v0`` (read now) and the
+        uploaded ``C = 0``, ``F = I``; the other slots are written before they are read."""
+        p, f = self.p, self.np_dtype
+        self.start.x.from_numpy(np.asarray(p.x0, f)[None])
+        self.start.v.from_numpy((p.v0 * (1.0 - p.glued[:, None])).astype(f)[None])
+        self.start.copy_to(self.state, 0, 0, self.n)
 
     def _save(self, src: int, t: int) -> None:
         """Checkpoint of control step ``t`` from slot ``src`` (positions only without grad)."""

@@ -192,7 +192,7 @@ class Adjoint:
     ``C``, ``F`` and the body fields are the Taichi ``.grad`` of the primal arrays), the g2p
     grid copies ``scratch`` and the node adjoints ``grid = (dL/d mv, dL/d m)``; ``oscratch``,
     ``ogrid`` and ``ngrid`` (the object's mass gradient) are the object field's
-    (placeholders without one)."""
+    (placeholders without one); ``seed`` stages a per-particle adjoint for one slot."""
 
     x: object
     v: object
@@ -206,6 +206,7 @@ class Adjoint:
     oscratch: object
     ogrid: object
     ngrid: object
+    seed: object
 
     @classmethod
     def allocate(cls, pool: ArrayPool, dtype, state: State, body: Body,
@@ -219,7 +220,7 @@ class Adjoint:
         oscratch.fill(0)
         return cls(pool(v3, (slots, n)), pool(v3, (slots, n)), state.C.grad, state.F.grad,
                    body.phi.grad, body.E.grad, body.actp.grad, scratch, pool(v4, flat(1, dims)),
-                   oscratch, pool(v4, nodes), pool(v3, nodes))
+                   oscratch, pool(v4, nodes), pool(v3, nodes), pool(v3, (n,)))
 
     @property
     def state(self) -> State:
