@@ -14,6 +14,7 @@ import numpy as np
 
 from dbtool.sim import kernels as K
 from dbtool.sim import kernels_adjoint as KA
+from dbtool.sim import slots
 from dbtool.sim.graphs import Call
 from dbtool.sim.state import Adjoint, State
 from dbtool.sim.stepper import Region, Stepper
@@ -45,7 +46,7 @@ def _seed(adj: Adjoint, slot: int, g: np.ndarray) -> None:
     x = _slot(adj, adj.x, slot)
     x += g.astype(x.dtype)
     adj.seed.from_numpy(x)
-    K.put_slot(adj.seed, adj.x, slot, adj.seed.shape[0])
+    slots.put_slot(adj.seed, adj.x, slot, adj.seed.shape[0])
 
 
 def backward(sp: Stepper, checkpoints: State, adj: Adjoint, regions: Sequence[Region],
@@ -63,11 +64,11 @@ def backward(sp: Stepper, checkpoints: State, adj: Adjoint, regions: Sequence[Re
         a.grad.fill(0)
     steps = dict(grad_x_steps or {})
     # Only slot S is read before it is written: zero it, then seed x and v there.
-    K.zero_slot(*adj.state, S, n)
+    slots.zero_slot(*adj.state, S, n)
     for arr, seed in ((adj.x, grad_x + steps.pop(len(regions), 0.0)), (adj.v, grad_v)):
         if seed is not None:
             adj.seed.from_numpy(np.broadcast_to(seed, (n, 3)).astype(f))
-            K.put_slot(adj.seed, arr, S, n)
+            slots.put_slot(adj.seed, arr, S, n)
     wact = body.wact.to_numpy().astype(np.float64)
     g_act = np.zeros(body.act.shape, np.float64)
     n_steps = len(regions)
@@ -103,5 +104,5 @@ def backward(sp: Stepper, checkpoints: State, adj: Adjoint, regions: Sequence[Re
 
 def _slot(adj: Adjoint, slab, slot: int) -> np.ndarray:
     """One slot of an adjoint slab, read through the staging array (not the whole slab)."""
-    K.take_slot(slab, adj.seed, slot, adj.seed.shape[0])
+    slots.take_slot(slab, adj.seed, slot, adj.seed.shape[0])
     return adj.seed.to_numpy()

@@ -15,7 +15,7 @@ from collections.abc import Callable
 import numpy as np
 
 from dbtool.sim import kernels as K
-from dbtool.sim import runtime
+from dbtool.sim import runtime, slots
 from dbtool.sim.backward import backward
 from dbtool.sim.boundaries import BOUND
 from dbtool.sim.model import SUBSTEPS, Material, Particles, Scene, clamp_nodes
@@ -136,7 +136,7 @@ class Simulator:
         if self.requires_grad:
             self.state.copy_to(self.checkpoints, src, t, self.n)
         else:
-            K.copy_x(self.state.x, self.checkpoints.x, src, t, self.n)
+            slots.copy_x(self.state.x, self.checkpoints.x, src, t, self.n)
 
     def forward(self, actions: np.ndarray | None = None,
                 progress: Callable[[int], object] | None = None) -> None:

@@ -22,6 +22,7 @@ import numpy as np
 import taichi as ti
 
 from dbtool.sim import kernels as K
+from dbtool.sim import slots
 
 
 class ArrayPool:
@@ -78,7 +79,7 @@ class State:
 
     def copy_to(self, dst: State, src_slot: int, dst_slot: int, n: int) -> None:
         """``dst[dst_slot] = self[src_slot]`` (checkpoint save / restore)."""
-        K.copy_state(*self, *dst, src_slot, dst_slot, n)
+        slots.copy_state(*self, *dst, src_slot, dst_slot, n)
 
 
 @dataclass
