@@ -130,6 +130,53 @@ def test_gradients_through_colliders_friction_and_initial_state():
     _check_every_field("raw", sim, loss, grads, rng, acts)
 
 
+def test_absent_particles_get_their_presence_gradient_and_nothing_else():
+    """A design's particles of presence 0 (straight-through occupancy, docs/method.md §3) carry
+    no mass and no stress, so the kernels skip their scatter and most of their adjoint; their
+    ``dL/dphi`` still matches finite differences (one-sided: a negative presence is no
+    material), and a presence of 1e-200, which takes the full path with the same (zero) mass,
+    gives the same gradients."""
+    rng = np.random.default_rng(3)
+    side, sp = 8, 0.0025
+    g = (np.stack(np.meshgrid(*[np.arange(side)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5)
+    x0 = g * sp + np.array([0.05, 0.0151, 0.05])
+    n = len(x0)
+    # scattered through the block's inside, as in a design, so that every node they touch also
+    # holds material (with the 1e-200 below, a node that only they touch would get a velocity)
+    absent = (rng.uniform(size=n) < 0.3) & np.all((g > 2) & (g < side - 2), axis=1)
+    wact = np.zeros((n, 4))
+    wact[:, 0] = g[:, 0] < side / 2
+    wact[:, 1] = 1 - wact[:, 0]
+    E = rng.uniform(2e4, 4e4, n)
+    acts = 0.3 * np.sin(np.arange(STEPS)[:, None] * 0.7 + np.arange(2)[None])
+    w = np.where(absent[:, None], 0.0, rng.normal(size=(n, 3)))  # no metric reads them
+
+    def run(phi: np.ndarray):
+        sim = Simulator(Scene(size=(0.15, 0.1, 0.1)), Particles(
+            x0=x0.copy(), phi=phi, E=E.copy(), wact=wact.copy(),
+            adir=np.tile([0, 1.0, 0], (n, 1)), glued=np.zeros(n),
+            v0=np.tile([0.3, -0.2, 0.1], (n, 1))), n_steps=STEPS)
+        sim.forward(acts)
+        return float((sim.final_state()["x"] * w).sum()), sim
+
+    phi = np.where(absent, 0.0, rng.uniform(0.6, 1, n))
+    base, sim = run(phi)
+    grads = sim.backward(w)
+    d = np.where(absent, rng.uniform(size=n), 0.0)
+    eps = 1e-5
+    fd = (4 * run(phi + eps * d)[0] - run(phi + 2 * eps * d)[0] - 3 * base) / (2 * eps)
+    an = float((grads["phi"] * d).sum())
+    print(f"absent d/dphi: fd={fd:.9e} analytic={an:.9e}")
+    assert abs(fd) > 1e-4 and abs(fd - an) < TOL * abs(fd)
+    full = run(np.where(absent, 1e-200, phi))[1].backward(w)
+    for key in ("phi", "E", "wact", "actions", "x0", "v0"):
+        scale = np.abs(full[key]).max()  # the 1e-200 presence adds terms of order 1e-200
+        assert scale > 0, key
+        np.testing.assert_allclose(grads[key], full[key], rtol=1e-12, atol=1e-14 * scale,
+                                   err_msg=key)
+    assert np.all(grads["E"][absent] == 0) and np.all(grads["x0"][absent] == 0)
+
+
 def test_gradient_episodes_are_bit_reproducible():
     """The controller gradient sums every particle into one number per group and step; it is
     summed in a fixed order, so two identical gradient episodes agree exactly (the autodiff

@@ -8,6 +8,8 @@ functions that the forward kernels (:mod:`dbtool.sim.kernels`) and their adjoint
 * Contact: where a task object with its own velocity field moves into the robot at a node,
   :func:`_contact` removes the normal relative velocity with Coulomb friction and conserves
   momentum; where they separate, each keeps its own velocity ("Contact").
+
+Their vector-Jacobian products (``_*_vjp``), used by ``grid_op_grad``, follow them here.
 """
 
 import taichi as ti
@@ -122,3 +124,67 @@ def _contact(vr, mr, vo, mo, gm, mu_c):
             d = sn * nrm + (mu_c * sn / lt) * wt
     total = mr + mo
     return vr + (mo / total) * d, vo - (mr / total) * d
+
+
+# ----------------------------------------------------------- adjoints (grid_op_grad)
+@ti.func
+def _friction_vjp(v, nrm, mu_f, g):
+    """Vector-Jacobian product of :func:`_friction` at ``v`` with the output adjoint ``g``."""
+    vn = v.dot(nrm)
+    out = g
+    if vn < 0.0:
+        vt = v - vn * nrm
+        lt = ti.sqrt(vt.dot(vt) + 1e-30)
+        if lt + mu_f * vn <= 0.0:
+            out = ti.Vector([0.0, 0.0, 0.0])
+        else:
+            h = vt / lt
+            g_vt = g + (mu_f * vn / lt) * (g - h * h.dot(g))
+            g_vn = mu_f * h.dot(g)
+            out = g_vt - nrm * nrm.dot(g_vt) + nrm * g_vn
+    return out
+
+
+@ti.func
+def _boundary_vjp(I, vin, g, boxes: ti.template(), ground_y, mu_f, dims, dx, held):
+    """Vector-Jacobian product of :func:`~dbtool.sim.boundaries._boundary` at ``vin``."""
+    pos = I * dx
+    v0, v1, v2, v3 = _colliders(pos, vin, boxes, ground_y, mu_f)
+    g = g * _wall_mask(I, v3, dims) * (1.0 - held)
+    g = _friction_vjp(v2, _box_normal(pos, boxes, 1), mu_f, g)
+    g = _friction_vjp(v1, _box_normal(pos, boxes, 0), mu_f, g)
+    if pos[1] <= ground_y:
+        g = _friction_vjp(v0, ti.Vector([0.0, 1.0, 0.0]), mu_f, g)
+    return g
+
+
+@ti.func
+def _contact_vjp(vr, mr, vo, mo, gm, mu_c, gr, go):
+    """Vector-Jacobian product of :func:`~dbtool.sim.boundaries._contact` for the output
+    adjoints ``gr``, ``go``: the adjoints of ``vr``, ``mr``, ``vo``, ``mo`` and ``gm``."""
+    nrm, ln = _contact_normal(gm)
+    w = vo - vr
+    sn = w.dot(nrm)
+    total = mr + mo
+    a = mo / total
+    b = mr / total
+    gd = a * gr - b * go
+    d = ti.Vector([0.0, 0.0, 0.0])
+    gw = ti.Vector([0.0, 0.0, 0.0])
+    ggm = ti.Vector([0.0, 0.0, 0.0])
+    if ln > 0.0 and sn > 0.0:
+        wt = w - sn * nrm
+        lt = ti.sqrt(wt.dot(wt) + 1e-30)
+        if lt <= mu_c * sn:
+            d = w
+            gw = gd
+        else:
+            th = wt / lt
+            d = sn * nrm + (mu_c * sn) * th
+            q = (mu_c * sn / lt) * (gd - th * th.dot(gd))
+            cc = gd.dot(nrm) + mu_c * gd.dot(th) - q.dot(nrm)
+            gw = cc * nrm + q
+            gn = cc * w + sn * gd - sn * q
+            ggm = (gn - nrm * nrm.dot(gn)) / ln
+    ga = (gr + go).dot(d)
+    return gr - gw, ga * (-mo / (total * total)), go + gw, ga * (mr / (total * total)), ggm

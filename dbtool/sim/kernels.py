@@ -106,17 +106,10 @@ def _tau_unit(Fn, u, a, nu, act_strength):
 
 
 @ti.func
-def _stress(
-    C: ti.template(), F: ti.template(), phi: ti.template(), E: ti.template(),
-    actp: ti.template(), adir: ti.template(), s, p, dx, dt, p_vol, p_rho, nu, act_strength,
-):
-    """``F[s+1] = (I + dt C) F`` and the APIC affine matrix of particle ``p`` at ``s``."""
+def _stress(Cp, Fn, ph, e, a, d, dx, dt, p_vol, p_rho, nu, act_strength):
+    """The APIC affine matrix of a particle with ``F[s+1] = Fn``."""
     inv_dx = 1.0 / dx
-    Cp = C[s, p]
-    Fn = (ti.Matrix.identity(float, 3) + dt * Cp) @ F[s, p]
-    F[s + 1, p] = Fn
-    tau = E[p] * _tau_unit(Fn, Fn @ adir[p], actp[p], nu, act_strength)
-    ph = phi[p]
+    tau = e * _tau_unit(Fn, Fn @ d, a, nu, act_strength)
     return (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * tau + (p_rho * p_vol * ph) * Cp
 
 
@@ -159,7 +152,30 @@ def _p2g_particle(
     nscratch: ti.template(), xscratch: ti.template(), s, p, c, ny, nz, nxyz, lo, hi, dx, dt,
     p_vol, p_rho, nu, act_strength, multi: ti.template(), atomic: ti.template(),
 ):
-    Ap = _stress(C, F, phi, E, actp, adir, s, p, dx, dt, p_vol, p_rho, nu, act_strength)
+    Cp = C[s, p]
+    Fn = (ti.Matrix.identity(float, 3) + dt * Cp) @ F[s, p]
+    F[s + 1, p] = Fn
+    obj = False
+    if ti.static(multi):
+        obj = field[p] > 0.0
+    ph = phi[p]
+    # A robot particle of presence 0 has no mass and no stress: it scatters only zeros. It
+    # still moves with the grid and its F is kept, for its presence adjoint.
+    if ph != 0.0 or obj:
+        Ap = _stress(Cp, Fn, ph, E[p], actp[p], adir[p], dx, dt, p_vol, p_rho, nu,
+                     act_strength)
+        _p2g_scatter(x, v, phi, damp, scratch, oscratch, nscratch, xscratch, Ap, obj, s, p, c,
+                     ny, nz, nxyz, lo, hi, dx, p_rho, p_vol, multi, atomic)
+
+
+@ti.func
+def _p2g_scatter(
+    x: ti.template(), v: ti.template(), phi: ti.template(), damp: ti.template(),
+    scratch: ti.template(), oscratch: ti.template(), nscratch: ti.template(),
+    xscratch: ti.template(), Ap, obj, s, p, c, ny, nz, nxyz, lo, hi, dx, p_rho, p_vol,
+    multi: ti.template(), atomic: ti.template(),
+):
+    """Mass and APIC momentum of particle ``p`` onto its 27 nodes."""
     m_unit = p_rho * p_vol
     inv_dx = 1.0 / dx
     xp = x[s, p]
@@ -168,9 +184,6 @@ def _p2g_particle(
     w, dw = _weights(fx)
     m = m_unit * phi[p]
     mv = (m * damp[p]) * v[s, p]
-    obj = False
-    if ti.static(multi):
-        obj = field[p] > 0.0
     b = _node(c, base[0], base[1], base[2], ny, nz, nxyz)
     # The node momentum w (mv + A (off - fx) dx) is built up along the loops: with
     # q0 = mv - dx A fx and the columns a_d = dx A[:, d], it is w (q0 + i a0 + j a1 + k a2).

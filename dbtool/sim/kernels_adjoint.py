@@ -9,7 +9,7 @@ the order of :mod:`dbtool.sim.kernels`, with the adjoint arrays of
 
 import taichi as ti
 
-from dbtool.sim.boundaries import _box_normal, _colliders, _contact_normal, _wall_mask
+from dbtool.sim.boundaries import _boundary_vjp, _contact_vjp
 from dbtool.sim.kernels import (
     SPREAD,
     _base,
@@ -88,6 +88,36 @@ def _hessian_vjp(w, dw, g, i: ti.template(), j: ti.template(), k: ti.template())
     return out
 
 
+@ti.func
+def _absent_phi_vjp(ggrid: ti.template(), w, fx, vp, Cp, Fn, e, a, d, base, ny, nz, dx, dt,
+                    p_vol, p_rho, nu, act_strength):
+    """The two terms of ``dL/dphi`` (through the mass and through ``A``) of a robot particle
+    whose presence is 0 (no mass, no stress, so no other adjoint): the p2g adjoint's node
+    gather and ``d A / d phi`` only, the same arithmetic as :func:`p2g_grad`."""
+    sg = ti.Vector([0.0, 0.0, 0.0])
+    so0 = ti.Vector([0.0, 0.0, 0.0])
+    so1 = ti.Vector([0.0, 0.0, 0.0])
+    so2 = ti.Vector([0.0, 0.0, 0.0])
+    gm = 0.0
+    b = _node(0, base[0], base[1], base[2], ny, nz, 0)
+    for i in ti.static(range(3)):
+        for j in ti.static(range(3)):
+            for k in ti.static(range(3)):
+                gg = ggrid[b + _node(0, i, j, k, ny, nz, 0)]
+                g = ti.Vector([gg[0], gg[1], gg[2]])
+                wt = w[i][0] * w[j][1] * w[k][2]
+                wg = wt * g
+                sg += wg
+                so0 = _step(so0, wg, i)
+                so1 = _step(so1, wg, j)
+                so2 = _step(so2, wg, k)
+                gm += wt * (g.dot(vp) + gg[3])
+    G = dx * (ti.Matrix.cols([so0, so1, so2]) - sg.outer_product(fx))
+    tu = _tau_unit(Fn, Fn @ d, a, nu, act_strength)
+    alpha = -dt * p_vol * 4.0 / (dx * dx)
+    return gm, (G * (alpha * e * tu + p_rho * p_vol * Cp)).sum()
+
+
 def _p2g_grad_kernel(multi: bool):
     """:func:`p2g_grad` compiled for one value of ``multi`` (see
     :func:`dbtool.sim.kernels._p2g_kernels`)."""
@@ -130,6 +160,15 @@ def _p2g_grad_kernel(multi: bool):
             obj = False
             if ti.static(multi_):
                 obj = field[p] > 0.0
+            if ph == 0.0 and not obj and ti.abs(Fg[s + 1, p]).max() == 0.0:
+                # an absent particle: only its presence adjoint is not zero
+                gm0, g_ph0 = _absent_phi_vjp(ggrid, w, fx, vp, Cp, Fn, e, a, d, base, ny, nz, dx,
+                                             dt, p_vol, p_rho, nu, act_strength)
+                phig[p] = phig[p] + m_unit * gm0 + g_ph0
+                vg[s, p] = ti.Vector([0.0, 0.0, 0.0])
+                Cg[s, p] = ti.Matrix.zero(float, 3, 3)
+                Fg[s, p] = ti.Matrix.zero(float, 3, 3)
+                continue
             # dpos = (off - fx) dx, so A dpos = dx (A off - A fx) and every sum over the nodes of
             # something times dpos splits into a sum with the constant offsets and one with fx;
             # A off = i A[:, 0] + j A[:, 1] + k A[:, 2] is built up along the loops.
@@ -188,69 +227,6 @@ def _p2g_grad_kernel(multi: bool):
 
 
 p2g_grad = {m: _p2g_grad_kernel(m) for m in (False, True)}  # ``p2g_grad[multi]``
-
-
-@ti.func
-def _friction_vjp(v, nrm, mu_f, g):
-    """Vector-Jacobian product of :func:`_friction` at ``v`` with the output adjoint ``g``."""
-    vn = v.dot(nrm)
-    out = g
-    if vn < 0.0:
-        vt = v - vn * nrm
-        lt = ti.sqrt(vt.dot(vt) + 1e-30)
-        if lt + mu_f * vn <= 0.0:
-            out = ti.Vector([0.0, 0.0, 0.0])
-        else:
-            h = vt / lt
-            g_vt = g + (mu_f * vn / lt) * (g - h * h.dot(g))
-            g_vn = mu_f * h.dot(g)
-            out = g_vt - nrm * nrm.dot(g_vt) + nrm * g_vn
-    return out
-
-
-@ti.func
-def _boundary_vjp(I, vin, g, boxes: ti.template(), ground_y, mu_f, dims, dx, held):
-    """Vector-Jacobian product of :func:`~dbtool.sim.boundaries._boundary` at ``vin``."""
-    pos = I * dx
-    v0, v1, v2, v3 = _colliders(pos, vin, boxes, ground_y, mu_f)
-    g = g * _wall_mask(I, v3, dims) * (1.0 - held)
-    g = _friction_vjp(v2, _box_normal(pos, boxes, 1), mu_f, g)
-    g = _friction_vjp(v1, _box_normal(pos, boxes, 0), mu_f, g)
-    if pos[1] <= ground_y:
-        g = _friction_vjp(v0, ti.Vector([0.0, 1.0, 0.0]), mu_f, g)
-    return g
-
-
-@ti.func
-def _contact_vjp(vr, mr, vo, mo, gm, mu_c, gr, go):
-    """Vector-Jacobian product of :func:`~dbtool.sim.boundaries._contact` for the output
-    adjoints ``gr``, ``go``: the adjoints of ``vr``, ``mr``, ``vo``, ``mo`` and ``gm``."""
-    nrm, ln = _contact_normal(gm)
-    w = vo - vr
-    sn = w.dot(nrm)
-    total = mr + mo
-    a = mo / total
-    b = mr / total
-    gd = a * gr - b * go
-    d = ti.Vector([0.0, 0.0, 0.0])
-    gw = ti.Vector([0.0, 0.0, 0.0])
-    ggm = ti.Vector([0.0, 0.0, 0.0])
-    if ln > 0.0 and sn > 0.0:
-        wt = w - sn * nrm
-        lt = ti.sqrt(wt.dot(wt) + 1e-30)
-        if lt <= mu_c * sn:
-            d = w
-            gw = gd
-        else:
-            th = wt / lt
-            d = sn * nrm + (mu_c * sn) * th
-            q = (mu_c * sn / lt) * (gd - th * th.dot(gd))
-            cc = gd.dot(nrm) + mu_c * gd.dot(th) - q.dot(nrm)
-            gw = cc * nrm + q
-            gn = cc * w + sn * gd - sn * q
-            ggm = (gn - nrm * nrm.dot(gn)) / ln
-    ga = (gr + go).dot(d)
-    return gr - gw, ga * (-mo / (total * total)), go + gw, ga * (mr / (total * total)), ggm
 
 
 @ti.func
@@ -327,11 +303,7 @@ def _g2p_grad_particle(
     gscratch: ti.template(), ogscratch: ti.template(), s, p, c, ny, nz, nxyz, lo, hi, dx, dt,
     multi: ti.template(), atomic: ti.template(),
 ):
-    inv_dx = 1.0 / dx
     xp = x[s, p]
-    base = _base(xp, inv_dx, lo, hi)
-    fx = xp * inv_dx - ti.cast(base, float)
-    w, dw = _weights(fx)
     keep = 1.0 - glued[p]
     obj = False
     if ti.static(multi):
@@ -339,6 +311,26 @@ def _g2p_grad_particle(
     gx1 = xg[s + 1, p]
     gnv = keep * (vg[s + 1, p] + dt * gx1)
     gnC = keep * Cg[s + 1, p]
+    if ti.abs(gnv).max() == 0.0 and ti.abs(gnC).max() == 0.0:
+        # nothing flows back through this particle's transfer (a glued particle, or one with
+        # presence 0 that no metric reads): its node adjoints would all be zero
+        xg[s, p] = gx1
+    else:
+        _g2p_grad_scatter(grid_v, grid_ov, xg, gscratch, ogscratch, gx1, gnv, gnC, xp,
+                          obj, s, p, c, ny, nz, nxyz, lo, hi, dx, multi, atomic)
+
+
+@ti.func
+def _g2p_grad_scatter(
+    grid_v: ti.template(), grid_ov: ti.template(), xg: ti.template(),
+    gscratch: ti.template(), ogscratch: ti.template(), gx1, gnv, gnC, xp, obj, s, p, c, ny,
+    nz, nxyz, lo, hi, dx, multi: ti.template(), atomic: ti.template(),
+):
+    """Node velocity adjoints of particle ``p`` and its position adjoint at ``s``."""
+    inv_dx = 1.0 / dx
+    base = _base(xp, inv_dx, lo, hi)
+    fx = xp * inv_dx - ti.cast(base, float)
+    w, dw = _weights(fx)
     # The node adjoint u = gnv + 4/dx gnC (off - fx) = u0 + i c0 + j c1 + k c2, built up along
     # the loops; the fx adjoint of both g2p terms is dw . (v_node . u).
     kC = (4.0 * inv_dx) * gnC
