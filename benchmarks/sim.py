@@ -62,6 +62,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _sim_report import REFERENCE, evaluate_goals, render  # noqa: E402
+from _versions import checkouts  # noqa: E402
 
 try:
     from dbtool.sim.model import SUBSTEPS  # noqa: E402
@@ -299,25 +300,10 @@ def spawn(kind: str, extra: list[str], threads: int | None,
     return result
 
 
-def git(*args: str) -> str:
-    return subprocess.run(["git", *args], cwd=ROOT, check=True, capture_output=True,
-                          text=True).stdout.strip()
-
-
 def measure_versions(refs: list[str], sides: list[int], steps: int, repeats: int,
                      threads: int | None, log: Callable[[str], None]) -> list[dict[str, Any]]:
     """Speed of each old commit and of this checkout on the same workload, interleaved."""
-    tmp = Path(tempfile.mkdtemp(prefix="dbtool-versions-"))
-    versions: list[dict[str, Any]] = []
-    try:
-        for ref in refs:
-            commit = git("rev-parse", "--verify", f"{ref}^{{commit}}")
-            path = tmp / commit[:12]
-            git("worktree", "add", "--detach", str(path), commit)
-            versions.append({"ref": ref, "commit": commit, "path": path,
-                             "subject": git("log", "-1", "--format=%s", commit)[:100]})
-        versions.append({"ref": "this checkout", "commit": git("rev-parse", "HEAD"),
-                         "path": ROOT, "subject": "(working tree)"})
+    with checkouts(refs) as versions:
         for v in versions:
             v["speed"] = {}
         order = versions + versions[::-1]
@@ -331,12 +317,6 @@ def measure_versions(refs: list[str], sides: list[int], steps: int, repeats: int
                 if best is None or row["forward_pss"] + row["fwd_bwd_pss"] > \
                         best["forward_pss"] + best["fwd_bwd_pss"]:
                     v["speed"][side] = row
-    finally:
-        for v in versions:
-            if v["path"] != ROOT:
-                subprocess.run(["git", "worktree", "remove", "--force", str(v["path"])],
-                               cwd=ROOT, capture_output=True)
-        shutil.rmtree(tmp, ignore_errors=True)
     return [{"ref": v["ref"], "commit": v["commit"], "subject": v["subject"],
              "speed": [v["speed"][side] for side in sides]} for v in versions]
 

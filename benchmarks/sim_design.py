@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -39,6 +38,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _results import write_result  # noqa: E402
+from _versions import checkouts  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "sim-design.json"
@@ -111,11 +111,6 @@ def spawn(code: Path, robot_file: str, steps: int, repeats: int) -> dict[str, An
         return json.loads(out.read_text())
 
 
-def git(*args: str) -> str:
-    return subprocess.run(["git", *args], cwd=ROOT, check=True, capture_output=True,
-                          text=True).stdout.strip()
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--methods", nargs="+", default=["particle"])
@@ -131,18 +126,9 @@ def main(argv: list[str] | None = None) -> int:
                                                             args.repeats)))
         return 0
     started = time.time()
-    tmp = Path(tempfile.mkdtemp(prefix="dbtool-sim-design-"))
-    versions = []
-    try:
-        robots = build_robots(args.methods, tmp)
-        for ref in args.compare:
-            commit = git("rev-parse", "--verify", f"{ref}^{{commit}}")
-            path = tmp / commit[:12]
-            git("worktree", "add", "--detach", str(path), commit)
-            versions.append({"ref": ref, "commit": commit, "path": path,
-                             "subject": git("log", "-1", "--format=%s", commit)[:100]})
-        versions.append({"ref": "this checkout", "commit": git("rev-parse", "HEAD"),
-                         "path": ROOT, "subject": "(working tree)"})
+    with tempfile.TemporaryDirectory(prefix="dbtool-sim-design-") as tmp, \
+            checkouts(args.compare) as versions:
+        robots = build_robots(args.methods, Path(tmp))
         for v in versions:
             v["rows"] = [None] * len(robots)
         for r, robot in enumerate(robots):
@@ -153,12 +139,6 @@ def main(argv: list[str] | None = None) -> int:
                 best = v["rows"][r]
                 if best is None or row["fwd_bwd_pss"] > best["fwd_bwd_pss"]:
                     v["rows"][r] = row
-    finally:
-        for v in versions:
-            if v["path"] != ROOT:
-                subprocess.run(["git", "worktree", "remove", "--force", str(v["path"])],
-                               cwd=ROOT, capture_output=True)
-        shutil.rmtree(tmp, ignore_errors=True)
     lines = ["| start of (active / lattice) | code | forward M/s | forward+backward M/s |",
              "| --- | --- | ---: | ---: |"]
     for r, robot in enumerate(robots):

@@ -89,11 +89,12 @@ def _hessian_vjp(w, dw, g, i: ti.template(), j: ti.template(), k: ti.template())
 
 
 @ti.func
-def _absent_phi_vjp(ggrid: ti.template(), w, fx, vp, Cp, Fn, e, a, d, base, ny, nz, dx, dt,
-                    p_vol, p_rho, nu, act_strength):
-    """The two terms of ``dL/dphi`` (through the mass and through ``A``) of a robot particle
-    whose presence is 0 (no mass, no stress, so no other adjoint): the p2g adjoint's node
-    gather and ``d A / d phi`` only, the same arithmetic as :func:`p2g_grad`."""
+def _absent_phi_vjp(ggrid: ti.template(), w, fx, vp, Cp, tu, e, base, ny, nz, dx, dt, p_vol,
+                    p_rho):
+    """The two terms of ``dL/dphi`` (through the mass and through ``A``; ``tu`` is the unit
+    stress of :func:`~dbtool.sim.kernels._tau_unit`) of a robot particle whose presence is 0
+    (no mass, no stress, so no other adjoint): the p2g adjoint's node gather and ``d A / d phi``
+    only, the same arithmetic as :func:`p2g_grad`."""
     sg = ti.Vector([0.0, 0.0, 0.0])
     so0 = ti.Vector([0.0, 0.0, 0.0])
     so1 = ti.Vector([0.0, 0.0, 0.0])
@@ -113,7 +114,6 @@ def _absent_phi_vjp(ggrid: ti.template(), w, fx, vp, Cp, Fn, e, a, d, base, ny, 
                 so2 = _step(so2, wg, k)
                 gm += wt * (g.dot(vp) + gg[3])
     G = dx * (ti.Matrix.cols([so0, so1, so2]) - sg.outer_product(fx))
-    tu = _tau_unit(Fn, Fn @ d, a, nu, act_strength)
     alpha = -dt * p_vol * 4.0 / (dx * dx)
     return gm, (G * (alpha * e * tu + p_rho * p_vol * Cp)).sum()
 
@@ -155,20 +155,20 @@ def _p2g_grad_kernel(multi: bool):
             Cp = C[s, p]
             Fp = F[s, p]
             Fn = (ti.Matrix.identity(float, 3) + dt * Cp) @ Fp
-            tau = e * _tau_unit(Fn, Fn @ d, a, nu, act_strength)
-            Ap = (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * tau + (m_unit * ph) * Cp
+            tu = _tau_unit(Fn, Fn @ d, a, nu, act_strength)
             obj = False
             if ti.static(multi_):
                 obj = field[p] > 0.0
             if ph == 0.0 and not obj and ti.abs(Fg[s + 1, p]).max() == 0.0:
                 # an absent particle: only its presence adjoint is not zero
-                gm0, g_ph0 = _absent_phi_vjp(ggrid, w, fx, vp, Cp, Fn, e, a, d, base, ny, nz, dx,
-                                             dt, p_vol, p_rho, nu, act_strength)
+                gm0, g_ph0 = _absent_phi_vjp(ggrid, w, fx, vp, Cp, tu, e, base, ny, nz, dx, dt,
+                                             p_vol, p_rho)
                 phig[p] = phig[p] + m_unit * gm0 + g_ph0
                 vg[s, p] = ti.Vector([0.0, 0.0, 0.0])
                 Cg[s, p] = ti.Matrix.zero(float, 3, 3)
                 Fg[s, p] = ti.Matrix.zero(float, 3, 3)
                 continue
+            Ap = (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * (e * tu) + (m_unit * ph) * Cp
             # dpos = (off - fx) dx, so A dpos = dx (A off - A fx) and every sum over the nodes of
             # something times dpos splits into a sum with the constant offsets and one with fx;
             # A off = i A[:, 0] + j A[:, 1] + k A[:, 2] is built up along the loops.
