@@ -32,8 +32,9 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
         return
     if "key" in _STATE:
         ti.reset()
-    from dbtool.sim import graphs
+    from dbtool.sim import frontend, graphs
 
+    frontend.install()  # before the first kernel compiles
     graphs.reset()  # compiled graphs belong to the runtime being replaced
     n_threads = threads or int(os.environ.get("DBTOOL_THREADS", "0")) or os.cpu_count() or 1
     ti_arch = {"cpu": ti.cpu, "cuda": ti.cuda, "auto": ti.gpu}[arch]
