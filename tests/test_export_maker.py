@@ -1,7 +1,9 @@
-"""The gripper export as a maker builds it (docs/export.md): mounting holes clear of the fingers,
-alignment pins, channels sized for line and tube with round bends and the wall kept along the
-whole path, through-holes and knot pockets at the fingertips, parts in their print orientation,
-3MF materials, PrusaSlicer's verdict and the assembly sheet; and checks that can fail."""
+"""The committed reference export, valid and reproduced by a fresh export of its design
+(exports/README.md), and the gripper export as a maker builds it (docs/export.md): mounting
+holes clear of the fingers, alignment pins, channels sized for line and tube with round bends
+and the wall kept along the whole path, through-holes and knot pockets at the fingertips, parts
+in their print orientation, 3MF materials, PrusaSlicer's verdict and the assembly sheet; and
+checks that can fail."""
 
 import json
 import math
@@ -11,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import trimesh
 
 from dbtool.design import Design
 from dbtool.export.assembly import ExportConfig, build, export_design
@@ -24,9 +27,39 @@ SLICER = find_slicer()
 
 @pytest.fixture(scope="module")
 def made(tmp_path_factory):
+    """The reference design exported afresh with the committed export's settings."""
     out = tmp_path_factory.mktemp("maker") / "ref"
-    rep = export_design(Design.load(REFERENCE / "design.npz"), out, ExportConfig())
+    cfg = json.loads((REFERENCE / "report.json").read_text())["config"]
+    rep = export_design(Design.load(REFERENCE / "design.npz"), out, ExportConfig(**cfg))
     return out, rep
+
+
+def test_reference_export_is_valid_and_current(made):
+    """The committed reference export (exports/README.md): every file a printer gets is a
+    single watertight volume, and re-exporting its design reproduces it."""
+    rep = json.loads((REFERENCE / "report.json").read_text())
+    for name in ("finger", "finger_mirror", "base", "assembly"):
+        mesh = trimesh.load(REFERENCE / f"{name}.stl")
+        assert mesh.is_watertight and mesh.is_volume, name
+        assert len(mesh.split(only_watertight=False)) == 1, name
+        assert mesh.volume == pytest.approx(rep["parts"][name]["volume_mm3"], rel=1e-4)
+    scene = trimesh.load(REFERENCE / "assembly.3mf")
+    assert sorted(g.volume for g in scene.geometry.values()) == pytest.approx(
+        sorted(rep["parts"][n]["volume_mm3"] for n in ("finger", "finger_mirror", "base")),
+        rel=1e-4)
+    assert abs(rep["volume_check"]["ratio"] - 1) < 0.1
+    tj = json.loads((REFERENCE / "tendons.json").read_text())
+    assert len(tj["tendons"]) == 4 and all(len(t["points"]) == 4 for t in tj["tendons"])
+    assert rep["tendons"]["all_ok"]
+    out, again = made
+    assert again["config"] == rep["config"]
+    for name, part in rep["parts"].items():
+        assert again["parts"][name]["volume_mm3"] == pytest.approx(part["volume_mm3"], rel=1e-6)
+    fresh = json.loads((out / "tendons.json").read_text())["tendons"]
+    for a, b in zip(fresh, tj["tendons"], strict=True):
+        assert (a["name"], a["role"]) == (b["name"], b["role"])
+        assert np.allclose(a["points"], b["points"], atol=1e-3)
+        assert np.allclose(a["exit"], b["exit"], atol=1e-3)
 
 
 def test_every_maker_check_passes_on_the_reference(made):
