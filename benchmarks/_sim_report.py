@@ -97,7 +97,10 @@ def render(result: dict[str, Any]) -> str:
             "JIT compile (first minus second forward+backward, "
             f"{c['episode']['side']}^3 particles, "
             f"T={c['episode']['steps']}): cold cache {c['cold_compile_s']:.1f} s, warm cache "
-            f"{c['warm_cache_compile_s']:.1f} s (Taichi init {c['cold']['init_s']:.1f} s; "
+            f"{c['warm_cache_compile_s']:.1f} s"
+            + (f" ({c['warm_cache_taichi_frontend_s']:.1f} s with Taichi's own front end; "
+               f"medians of {c['repeats']})" if "warm_cache_taichi_frontend_s" in c else "")
+            + f" (Taichi init {c['cold']['init_s']:.1f} s; "
             f"cache {c['cache_files']} files, {c['cache_bytes'] / MIB:.1f} MiB"
             + ("" if c["cache_env_honoured"] else "; WARNING: cache dir not honoured") + ").",
         ]

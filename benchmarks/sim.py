@@ -22,8 +22,10 @@ Timed runs follow one warm-up episode; each number is the median of ``--repeats`
 JIT compile time is the first forward+backward of a tiny episode (T=2) minus an identical warm
 second run, in a fresh subprocess whose Taichi offline cache is an empty temporary directory
 (``TI_OFFLINE_CACHE_FILE_PATH``, which ``ti.init`` reads for its ``offline_cache_file_path``
-option) -> "cold"; then again in a second fresh subprocess with the now populated cache ->
-"warm cache".
+option) -> "cold"; then again in fresh subprocesses with the now populated cache -> "warm
+cache", the median of ``--compile-repeats`` runs, alternating with as many runs that leave
+Taichi's own front end unmemoized (``DBTOOL_FAST_FRONTEND=0``, dbtool/sim/frontend.py) ->
+"warm cache, Taichi's front end".
 
 ``--compare REF ...`` also times older commits on the 20k workload in the same run: each
 is checked out into a temporary git worktree and the speed worker runs with that checkout's
@@ -326,13 +328,19 @@ def dir_stats(path: Path) -> tuple[int, int]:
     return len(files), sum(p.stat().st_size for p in files)
 
 
-def measure_compile(threads: int | None) -> dict[str, Any]:
+def measure_compile(threads: int | None, repeats: int = 1) -> dict[str, Any]:
     cache = Path(tempfile.mkdtemp(prefix="dbtool-ticache-"))
     try:
         env = {"TI_OFFLINE_CACHE_FILE_PATH": str(cache)}
         cold = spawn("compile", [], threads, env)
         files, size = dir_stats(cache)
-        warm = spawn("compile", [], threads, env)
+        runs: dict[str, list[dict]] = {"1": [], "0": []}
+        for _ in range(repeats):  # memoized and Taichi's own front end, alternating
+            for fast in runs:
+                runs[fast].append(spawn("compile", [], threads,
+                                        {**env, "DBTOOL_FAST_FRONTEND": fast}))
+        warm = sorted(runs["1"], key=lambda r: r["compile_s"])[(repeats - 1) // 2]
+        plain = sorted(runs["0"], key=lambda r: r["compile_s"])[(repeats - 1) // 2]
     finally:
         shutil.rmtree(cache, ignore_errors=True)
     honoured = files > 0 and cold["taichi_cache_path"] == str(cache)
@@ -341,9 +349,12 @@ def measure_compile(threads: int | None) -> dict[str, Any]:
               "the cold number may have used a warm cache", file=sys.stderr)
     return {
         "episode": {"side": COMPILE_SIDE, "steps": COMPILE_STEPS, "substeps": SUBSTEPS},
-        "cold": cold, "warm": warm, "cache_files": files, "cache_bytes": size,
-        "cache_env_honoured": honoured,
+        "cold": cold, "warm": warm, "warm_taichi_frontend": plain, "repeats": repeats,
+        "warm_runs_s": [r["compile_s"] for r in runs["1"]],
+        "warm_taichi_frontend_runs_s": [r["compile_s"] for r in runs["0"]],
+        "cache_files": files, "cache_bytes": size, "cache_env_honoured": honoured,
         "cold_compile_s": cold["compile_s"], "warm_cache_compile_s": warm["compile_s"],
+        "warm_cache_taichi_frontend_s": plain["compile_s"],
     }
 
 
@@ -392,6 +403,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--quick", action="store_true",
                    help="CI smoke test: 5k particles only, T=5, 1 repeat, memory at T=5")
     p.add_argument("--skip-compile", action="store_true", help="skip the JIT compile timing")
+    p.add_argument("--compile-repeats", type=int, default=3,
+                   help="warm-cache JIT runs per front end (median)")
     p.add_argument("--skip-memory", action="store_true", help="skip the peak-memory episodes")
     p.add_argument("--compare", nargs="+", default=[], metavar="REF",
                    help="older commits to time on the same workload in the same run")
@@ -426,7 +439,7 @@ def main(argv: list[str] | None = None) -> int:
 
     if not args.skip_compile:
         log("JIT compile: cold cache, then warm cache")
-        compile_ = measure_compile(args.threads)
+        compile_ = measure_compile(args.threads, args.compile_repeats)
     for side in sides:
         log(f"speed: {side ** 3} particles, T={args.steps}, {args.repeats} repeats")
         speed.append(spawn("speed", ["--side", str(side), "--steps", str(args.steps),
@@ -451,6 +464,7 @@ def main(argv: list[str] | None = None) -> int:
             "sizes": [s ** 3 for s in sides], "sides": sides, "steps": args.steps,
             "substeps": SUBSTEPS, "repeats": args.repeats, "mem_steps": args.mem_steps,
             "warmup_episodes": 1, "quick": args.quick, "compare": args.compare,
+            "compile_repeats": args.compile_repeats,
             "spacing": SPACING, "dx": 0.005,
             "E": E_MODULUS, "actions": f"{AMPLITUDE}*sin, 2 groups, period {PERIOD} steps",
         },
