@@ -339,8 +339,8 @@ def measure_compile(threads: int | None, repeats: int = 1) -> dict[str, Any]:
             for fast in runs:
                 runs[fast].append(spawn("compile", [], threads,
                                         {**env, "DBTOOL_FAST_FRONTEND": fast}))
-        warm = sorted(runs["1"], key=lambda r: r["compile_s"])[(repeats - 1) // 2]
-        plain = sorted(runs["0"], key=lambda r: r["compile_s"])[(repeats - 1) // 2]
+        warm, plain = (sorted(runs[f], key=lambda r: r["compile_s"])[(repeats - 1) // 2]
+                       for f in ("1", "0"))  # the median run of each
     finally:
         shutil.rmtree(cache, ignore_errors=True)
     honoured = files > 0 and cold["taichi_cache_path"] == str(cache)

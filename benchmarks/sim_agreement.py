@@ -31,7 +31,6 @@ import argparse
 import hashlib
 import json
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -40,6 +39,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _versions import checkouts, git  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "sim-agreement.json"
@@ -90,11 +92,6 @@ def run(code: Path, threads: int, grads: bool, fast_math: bool,
         return json.loads(out.read_text())
 
 
-def git(*args: str) -> str:
-    return subprocess.run(["git", *args], cwd=ROOT, check=True, capture_output=True,
-                          text=True).stdout.strip()
-
-
 def compare(new: dict, old: dict) -> list[dict[str, Any]]:
     rows = []
     for body, o in old.items():
@@ -139,14 +136,8 @@ def old_numbers(commit: str, args: argparse.Namespace, fast: bool,
     cache = CACHE / f"sim-agreement-{commit[:12]}-{args.threads}t-{kind}-fm{int(fast)}{tag}.json"
     if cache.exists():
         return json.loads(cache.read_text())
-    tmp = Path(tempfile.mkdtemp(prefix="dbtool-agree-wt-"))
-    try:
-        git("worktree", "add", "--detach", str(tmp / "old"), commit)
-        old = run(tmp / "old", args.threads, args.grads, fast, precision)
-    finally:
-        subprocess.run(["git", "worktree", "remove", "--force", str(tmp / "old")], cwd=ROOT,
-                       capture_output=True)
-        shutil.rmtree(tmp, ignore_errors=True)
+    with checkouts([commit]) as versions:
+        old = run(versions[0]["path"], args.threads, args.grads, fast, precision)
     cache.parent.mkdir(parents=True, exist_ok=True)
     cache.write_text(json.dumps(old))
     return old
@@ -200,7 +191,6 @@ def main(argv: list[str] | None = None) -> int:
               "shapes": list(SHAPES), "grad_fields": list(GRADS)}
     result = {"benchmark": "dbtool.sim_agreement", "wall_s": time.time() - started,
               "seed": None, "config": config, "sections": sections, "report": report}
-    sys.path.insert(0, str(Path(__file__).parent))
     from _results import write_result
 
     write_result(result, args.out, DEFAULT_OUT, False, config)
