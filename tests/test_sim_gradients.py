@@ -296,6 +296,43 @@ def test_gradients_through_a_clamped_gripping_episode():
         assert rel < TOL, f"{name}: fd {fd} vs analytic {an} (rel {rel:.2e})"
 
 
+def test_glued_particles_are_kinematic_without_being_stepped():
+    """The gripping base is glued: the simulator steps only the other particles, and the
+    episode (every particle's positions) and every gradient are those of stepping all of them
+    (in float64, up to the order of the grid sums over the threads' particle ranges)."""
+    task = get_task("gripping")
+    ep = task.episode(reference_robot(task, "finger").compact())
+    p = ep.particles
+    held = p.glued > 0
+    rng = np.random.default_rng(5)
+    acts = task.controller(STEPS) + 0.2 * rng.standard_normal((STEPS, task.n_groups))
+    w = rng.normal(size=(p.n, 3))  # on the glued particles too: their x0 gradient
+    along = {2: rng.normal(size=(p.n, 3))}
+    out = {}
+    for kinematic in (False, True):
+        sim = Simulator(ep.scene, p, task.material, n_steps=STEPS, kinematic_glued=kinematic)
+        sim.forward(acts)
+        out[kinematic] = (sim.n_sim, sim.positions(), sim.final_state(),
+                          sim.backward(w, grad_x_steps=along))
+        sim.release()
+    (n_all, x_all, end_all, g_all), (n_kin, x_kin, end_kin, g_kin) = out[False], out[True]
+    assert n_all == p.n and n_kin == p.n - held.sum() and held.sum() > 1000
+    assert np.array_equal(x_kin[:, held], np.broadcast_to(p.x0[held], x_kin[:, held].shape))
+    assert np.abs(x_all[:, held] - p.x0[held]).max() == 0.0  # stepped, they stay put too
+    moved = np.abs(x_all[-1, ~held] - p.x0[~held]).max()
+    assert moved > 1e-4  # the fingers and the cube did move
+    assert np.abs(x_kin - x_all).max() < 1e-9 * moved
+    for k in ("x", "v"):
+        assert np.allclose(end_kin[k], end_all[k], rtol=1e-9, atol=1e-12)
+    for k in ("phi", "E", "wact", "actions", "x0", "v0"):
+        a, b = g_all[k], g_kin[k]
+        scale = np.abs(a).max()
+        assert scale > 0 or k == "v0", k
+        print(f"d/d{k}: max |kinematic - stepped| = {np.abs(a - b).max():.2e} of {scale:.2e}")
+        assert np.abs(a - b).max() <= 1e-9 * max(scale, 1e-30), k
+    assert np.array_equal(g_kin["x0"][held], w[held] + along[2][held])
+
+
 def _two_fields(mu=0.5, rng=None):
     """Two 8x8x8 bodies thrown into each other on the ground, the second one a task object
     with its own velocity field; returns a particle factory, a scene factory and the actions."""

@@ -107,6 +107,14 @@ class Particles:
         if not np.any(self.phi > 0):
             raise ValueError("the body is empty: every particle is inactive (occupancy 0)")
 
+    def subset(self, idx: np.ndarray) -> Particles:
+        """The particles ``idx`` (indices or a boolean mask), every field sliced alike."""
+        def take(a):
+            return None if a is None else np.asarray(a)[idx]
+
+        return Particles(**{k: take(getattr(self, k)) for k in (
+            "x0", "phi", "E", "wact", "adir", "glued", "v0", "damping", "field")})
+
 
 def clamp_nodes(x0: np.ndarray, glued: np.ndarray, dx: float,
                 dims: tuple[int, int, int]) -> np.ndarray:

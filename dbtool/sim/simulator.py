@@ -5,6 +5,11 @@ the split of NVIDIA Warp: the static description (:mod:`dbtool.sim.model`), the 
 (:mod:`dbtool.sim.state`), the stepping (:mod:`dbtool.sim.stepper`) and the backward pass
 (:mod:`dbtool.sim.backward`). The forward pass keeps one state per control step (the
 checkpoint); the backward pass re-simulates one control step at a time from it.
+
+Glued particles are kinematic: they never move and their stencils are all clamped nodes (held
+at rest), so what they scatter is overwritten and what they gather is zero. The simulator
+therefore steps only the other particles and keeps the glued ones for the clamp they define
+(docs/method.md §3, "Attachment"); outputs and gradients still cover every particle.
 """
 
 from __future__ import annotations
@@ -41,11 +46,19 @@ class Simulator:
         n_steps: int = 100,
         substeps: int = SUBSTEPS,
         requires_grad: bool = True,
+        kinematic_glued: bool = True,
     ) -> None:
         particles.validate()
         self.scene, self.p, self.mat = scene, particles, material or Material()
         self.n_steps, self.substeps, self.requires_grad = n_steps, substeps, requires_grad
-        self.n = n = particles.n
+        self.n = particles.n  # every particle: the arrays the methods take and return
+        glued = np.asarray(particles.glued) > 0
+        if glued.all():
+            raise ValueError("every particle is glued: nothing in the scene can move")
+        # ``moving``: the stepped particles' indices (None: all of them, see module docstring)
+        self.moving = np.flatnonzero(~glued) if kinematic_glued and glued.any() else None
+        self.q = particles if self.moving is None else particles.subset(self.moving)
+        self.n_sim = n = self.q.n
         dtype = runtime.dtype()
         atomic = runtime.arch() != "cpu"
         chunks = 1 if atomic else max(1, runtime.threads())
@@ -86,27 +99,51 @@ class Simulator:
             pass
 
     def _upload(self) -> None:
-        p, f, b = self.p, self.np_dtype, self.body
-        self.set_particle_fields(p.phi, p.E, p.wact)
+        p, f, b = self.q, self.np_dtype, self.body
+        self.set_particle_fields(self.p.phi, self.p.E, self.p.wact)
         norm = np.linalg.norm(p.adir, axis=1, keepdims=True)
         b.adir.from_numpy((p.adir / np.maximum(norm, 1e-12)).astype(f))
         b.glued.from_numpy(np.asarray(p.glued, f))
-        rate = np.zeros(self.n) if p.damping is None else np.asarray(p.damping, float)
+        rate = np.zeros(self.n_sim) if p.damping is None else np.asarray(p.damping, float)
         b.damp.from_numpy(np.exp(-rate * self.mat.dt).astype(f))
-        self.start.C.from_numpy(np.zeros((1, self.n, 3, 3), f))
-        self.start.F.from_numpy(np.broadcast_to(np.eye(3, dtype=f), (1, self.n, 3, 3)).copy())
+        self.start.C.from_numpy(np.zeros((1, self.n_sim, 3, 3), f))
+        self.start.F.from_numpy(np.broadcast_to(np.eye(3, dtype=f), (1, self.n_sim, 3, 3))
+                                .copy())
         if self.multi:
             b.field.from_numpy((np.asarray(p.field) > 0).astype(f))
-        if np.any(np.asarray(p.glued) > 0):
-            self.grid.clamp.from_numpy(
-                clamp_nodes(p.x0, p.glued, self.scene.dx, self.scene.grid).astype(f).ravel())
+        if np.any(np.asarray(self.p.glued) > 0):
+            self.grid.clamp.from_numpy(clamp_nodes(
+                self.p.x0, self.p.glued, self.scene.dx, self.scene.grid).astype(f).ravel())
 
     def set_particle_fields(self, phi=None, E=None, wact=None) -> None:
-        """Replace occupancy, stiffness or actuator weights without re-allocating."""
+        """Replace occupancy, stiffness or actuator weights (of every particle) without
+        re-allocating."""
         for name, value in (("phi", phi), ("E", E), ("wact", wact)):
             if value is not None:
                 setattr(self.p, name, np.asarray(value))
+                value = self._moving(np.asarray(value))
+                setattr(self.q, name, value)
                 getattr(self.body, name).from_numpy(np.asarray(value, self.np_dtype))
+
+    def _moving(self, a: np.ndarray) -> np.ndarray:
+        """The stepped particles' rows of a per-particle array."""
+        return a if self.moving is None else a[self.moving]
+
+    def _every(self, a: np.ndarray, glued: np.ndarray | float = 0.0) -> np.ndarray:
+        """A per-particle array of the stepped particles (particle axis 1 when ``a`` has a
+        leading axis of slots) widened to every particle, ``glued`` in the glued rows."""
+        if self.moving is None:
+            return a
+        axis = 1 if a.ndim == 3 else 0
+        shape = list(a.shape)
+        shape[axis] = self.n
+        out = np.empty(shape, a.dtype)
+        rows = np.ones(self.n, bool)
+        rows[self.moving] = False
+        index = (slice(None), rows) if axis else rows
+        out[index] = glued
+        out[(slice(None), self.moving) if axis else self.moving] = a
+        return out
 
     def set_actions(self, actions: np.ndarray) -> None:
         """Per-control-step actuation, shape ``(n_steps, groups <= MAX_GROUPS)``."""
@@ -126,17 +163,17 @@ class Simulator:
     def _initial_state(self) -> None:
         """Slot 0 of the substep slab: the particles' ``x0``, ``v0`` (read now) and the
         uploaded ``C = 0``, ``F = I``; the other slots are written before they are read."""
-        p, f = self.p, self.np_dtype
+        p, f = self.q, self.np_dtype
         self.start.x.from_numpy(np.asarray(p.x0, f)[None])
         self.start.v.from_numpy((p.v0 * (1.0 - p.glued[:, None])).astype(f)[None])
-        self.start.copy_to(self.state, 0, 0, self.n)
+        self.start.copy_to(self.state, 0, 0, self.n_sim)
 
     def _save(self, src: int, t: int) -> None:
         """Checkpoint of control step ``t`` from slot ``src`` (positions only without grad)."""
         if self.requires_grad:
-            self.state.copy_to(self.checkpoints, src, t, self.n)
+            self.state.copy_to(self.checkpoints, src, t, self.n_sim)
         else:
-            slots.copy_x(self.state.x, self.checkpoints.x, src, t, self.n)
+            slots.copy_x(self.state.x, self.checkpoints.x, src, t, self.n_sim)
 
     def forward(self, actions: np.ndarray | None = None,
                 progress: Callable[[int], object] | None = None) -> None:
@@ -155,18 +192,21 @@ class Simulator:
             sp.segment(t, self.regions[t])
             lo, hi, vmax = sp.check(t, self.regions[t])
             self._save(S, t + 1)
-            self.state.copy_to(self.state, S, 0, self.n)
+            self.state.copy_to(self.state, S, 0, self.n_sim)
             if progress is not None:
                 progress(1)
 
     # ----------------------------------------------------------------- outputs
     def positions(self) -> np.ndarray:
         """Particle positions at every control step, shape ``(n_steps + 1, N, 3)``."""
-        return self.checkpoints.x.to_numpy()
+        glued_x0 = self.p.x0 if self.moving is None else self.p.x0[self.p.glued > 0]
+        return self._every(self.checkpoints.x.to_numpy(), glued_x0.astype(self.np_dtype))
 
     def final_state(self) -> dict[str, np.ndarray]:
         """Positions and velocities after the last control step."""
-        return {"x": self.state.x.to_numpy()[0], "v": self.state.v.to_numpy()[0]}
+        x0 = self.p.x0 if self.moving is None else self.p.x0[self.p.glued > 0]
+        return {"x": self._every(self.state.x.to_numpy()[0], x0.astype(self.np_dtype)),
+                "v": self._every(self.state.v.to_numpy()[0])}
 
     def backward(self, grad_x: np.ndarray, grad_v: np.ndarray | None = None,
                  grad_x_steps: dict[int, np.ndarray] | None = None) -> dict:
@@ -180,8 +220,20 @@ class Simulator:
         if len(self.regions) != self.n_steps:
             raise RuntimeError("call forward() before backward()")
         EPISODES["backward"] += 1
-        return backward(self.stepper, self.checkpoints, self.adjoint, self.regions, grad_x,
-                        grad_v, grad_x_steps)
+        steps = {t: self._moving(np.asarray(g)) for t, g in (grad_x_steps or {}).items()}
+        g = backward(self.stepper, self.checkpoints, self.adjoint, self.regions,
+                     self._moving(np.asarray(grad_x)),
+                     None if grad_v is None else self._moving(np.asarray(grad_v)), steps)
+        if self.moving is None:
+            return g
+        # a glued particle's final position is its x0; nothing else depends on it
+        held = np.asarray(self.p.glued) > 0
+        gx0 = np.asarray(grad_x)[held] + sum(np.asarray(s)[held]
+                                              for s in (grad_x_steps or {}).values())
+        out = {k: self._every(g[k]) for k in ("phi", "E", "wact", "v0")}
+        out["x0"] = self._every(g["x0"], np.asarray(gx0, g["x0"].dtype))
+        out["actions"] = g["actions"]
+        return out
 
 
 def peak_rss_mb() -> float:
