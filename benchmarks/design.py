@@ -8,7 +8,9 @@ The run is the library call behind the CLI
 (:class:`dbtool.codesign.design_run.DesignRun`). Each stage's entry points are wrapped with a
 clock that charges every second to the innermost stage running (a base-model call made inside
 ``train_step`` counts as the base model's, not twice), so the stages and ``other`` add up to
-the total. Peak memory is the process's maximum resident set size.
+the total. Peak memory is the process's maximum resident set size. Every simulator pass is
+also recorded (forward without or with gradients, backward: particles stepped, substeps,
+seconds), which says where the simulation stage's time goes.
 
 Prints a markdown table and writes ``benchmarks/results/design.json`` (``design-quick.json``
 with ``--quick``).
@@ -30,6 +32,8 @@ import tempfile
 import time
 from collections import Counter, defaultdict
 from pathlib import Path
+
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 from _results import write_result  # noqa: E402
@@ -91,6 +95,45 @@ class StageClock:
                     setattr(m, name, timed)
 
 
+class EpisodeLog:
+    """Each :class:`~dbtool.sim.simulator.Simulator` pass: kind, particles stepped, substeps
+    and wall seconds."""
+
+    def __init__(self) -> None:
+        self.rows: list[dict] = []
+
+    def install(self) -> None:
+        from dbtool.sim.simulator import Simulator
+
+        for name in ("forward", "backward"):
+            fn = getattr(Simulator, name)
+
+            def timed(sim, *args, _fn=fn, _name=name, **kwargs):
+                t0 = time.perf_counter()
+                try:
+                    return _fn(sim, *args, **kwargs)
+                finally:
+                    kind = _name if _name == "backward" else (
+                        "forward (for gradients)" if sim.requires_grad else "forward")
+                    self.rows.append({"kind": kind, "particles": sim.n_sim,
+                                      "substeps": sim.n_steps * sim.substeps,
+                                      "seconds": time.perf_counter() - t0})
+            setattr(Simulator, name, functools.wraps(fn)(timed))
+
+    def summary(self) -> list[dict]:
+        out = []
+        for kind in ("forward", "forward (for gradients)", "backward"):
+            rows = [r for r in self.rows if r["kind"] == kind]
+            if not rows:
+                continue
+            work = sum(r["particles"] * r["substeps"] for r in rows)
+            sec = sum(r["seconds"] for r in rows)
+            out.append({"kind": kind, "passes": len(rows), "seconds": sec,
+                        "mean_particles": float(np.mean([r["particles"] for r in rows])),
+                        "particle_substeps_per_s": work / sec})
+        return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--task", default="gripping")
@@ -112,6 +155,8 @@ def main() -> None:
     settings = Settings(args.task, "quick", args.seed, **kw)
     clock = StageClock()
     clock.install()
+    episodes = EpisodeLog()
+    episodes.install()
     with tempfile.TemporaryDirectory() as tmp:
         run = DesignRun(Path(tmp) / "run", settings, prior)
         config = run.config()
@@ -130,13 +175,20 @@ def main() -> None:
     print("| --- | ---: | ---: | ---: |")
     for k, v, n in rows:
         print(f"| {k} | {n or ''} | {v:.1f} | {100 * v / total:.1f}% |")
+    passes = episodes.summary()
+    print("\n| simulator pass | passes | seconds | mean particles | M particle-substeps/s |")
+    print("| --- | ---: | ---: | ---: | ---: |")
+    for r in passes:
+        print(f"| {r['kind']} | {r['passes']} | {r['seconds']:.1f} | "
+              f"{r['mean_particles']:.0f} | {r['particle_substeps_per_s'] / 1e6:.2f} |")
     write_result({"task": args.task, "seed": args.seed, "quick": args.quick,
                   "total_s": total, "prior_load_s": load_s, "peak_rss_mib": peak_mib,
                   "final_metric": design.metrics[args.task],
                   "source": design.meta.get("source"),
                   "samples": design.meta.get("samples"),
                   "stages_s": {k: v for k, v, _ in rows},
-                  "stage_calls": {k: n for k, _, n in rows[:-1]}}, args.out,
+                  "stage_calls": {k: n for k, _, n in rows[:-1]},
+                  "simulator_passes": passes, "simulator_pass_log": episodes.rows}, args.out,
                  Path(__file__).parent / "results" / "design.json", args.quick,
                  {"benchmark": "design", "run": config,
                   "entry_points": [f"{s}: {m}:{a}" for s, m, a in STAGES]})
