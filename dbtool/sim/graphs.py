@@ -10,7 +10,8 @@ are bit-identical to launching them one by one (``DBTOOL_GRAPHS=0`` does that).
 
 Naming: an ndarray is one graph argument per distinct array (by identity); a scalar is one
 argument per kernel parameter name, which must hold a single value across the recording,
-except the parameters in ``per_value`` (the substep slot ``s``), named after their value.
+except the parameters in ``per_value`` (the slots ``s``, ``so``, ``gs``), named after their
+value.
 """
 
 from __future__ import annotations
@@ -72,7 +73,7 @@ def _symbol(name: str, desc: tuple, fp) -> Any:
     return ti.graph.Arg(kind.SCALAR, name, ti.i32 if desc[0] == "i" else fp)
 
 
-def bind(calls: Sequence[Call], per_value: frozenset[str] = frozenset({"s"})
+def bind(calls: Sequence[Call], per_value: frozenset[str] = frozenset({"s", "so", "gs"})
          ) -> tuple[tuple, dict[str, Any]]:
     """The graph's structure (kernels, argument names and types) and the run's values."""
     arrays: dict[int, str] = {}

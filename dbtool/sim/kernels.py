@@ -27,8 +27,11 @@ A substep is ``stress -> p2g -> grid_op -> g2p``:
   the normal relative velocity with Coulomb friction (docs/method.md §3, "Contact").
 
 The arguments come in a fixed order, built by the containers of :mod:`dbtool.sim.state`:
-particle state ``(x, v, C, F)``, body fields ``(phi, E, actp, adir)``, grid arrays, the slot
-``s`` and particle count ``n``, the grid size ``nx, ny, nz``, the region
+particle state ``(x, v, C, F)``, body fields ``(phi, E, actp, adir)``, grid arrays, the
+slots (the state is read from slot ``s`` and written to slot ``so``, grid arrays go to grid
+slot ``gs``: a substep's own slots where the backward pass reads them, two alternating state
+slots and one grid slot in a forward pass, whose data then stays in the CPU's caches) and the
+particle count ``n``, the grid size ``nx, ny, nz``, the region
 ``lx, ly, lz, hx, hy, hz`` and the constants of :class:`~dbtool.sim.state.Constants`.
 
 Grid arrays are flat: node ``(i, j, k)`` of grid copy (or substep) ``c`` is element
@@ -149,12 +152,12 @@ def _p2g_particle(
     x: ti.template(), v: ti.template(), C: ti.template(), F: ti.template(), phi: ti.template(),
     E: ti.template(), actp: ti.template(), adir: ti.template(), damp: ti.template(),
     field: ti.template(), scratch: ti.template(), oscratch: ti.template(),
-    nscratch: ti.template(), xscratch: ti.template(), s, p, c, ny, nz, nxyz, lo, hi, dx, dt,
-    p_vol, p_rho, nu, act_strength, multi: ti.template(), atomic: ti.template(),
+    nscratch: ti.template(), xscratch: ti.template(), s, so, p, c, ny, nz, nxyz, lo, hi, dx,
+    dt, p_vol, p_rho, nu, act_strength, multi: ti.template(), atomic: ti.template(),
 ):
     Cp = C[s, p]
     Fn = (ti.Matrix.identity(float, 3) + dt * Cp) @ F[s, p]
-    F[s + 1, p] = Fn
+    F[so, p] = Fn
     obj = False
     if ti.static(multi):
         obj = field[p] > 0.0
@@ -225,9 +228,9 @@ def _p2g_kernels(multi: bool) -> tuple:
     def p2g(
         x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
         damp: nd(), field: nd(), scratch: nd(), oscratch: nd(), nscratch: nd(), xscratch: nd(),
-        s: ti.i32, n: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32, lx: ti.i32,
-        ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, dt: float,
-        p_vol: float, p_rho: float, nu: float, act_strength: float, multi: ti.i32,
+        s: ti.i32, so: ti.i32, n: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
+        lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float,
+        dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float, multi: ti.i32,
     ):
         """Stress, then scatter of mass and APIC momentum; ``chunks`` particle ranges go into
         separate grid copies with plain adds (one range per CPU thread). With ``multi`` the
@@ -242,22 +245,22 @@ def _p2g_kernels(multi: bool) -> tuple:
             a, b = _range(c, chunks, n)
             for p in range(a, b):
                 _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, field, scratch, oscratch,
-                              nscratch, xscratch, s, p, c, ny, nz, nx * ny * nz, lo, hi, dx, dt,
-                              p_vol, p_rho, nu, act_strength, multi_, False)
+                              nscratch, xscratch, s, so, p, c, ny, nz, nx * ny * nz, lo, hi, dx,
+                              dt, p_vol, p_rho, nu, act_strength, multi_, False)
 
     @ti.kernel
     def p2g_atomic(
         x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
         damp: nd(), field: nd(), scratch: nd(), oscratch: nd(), nscratch: nd(), xscratch: nd(),
-        s: ti.i32, n: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32, lx: ti.i32, ly: ti.i32,
-        lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, dt: float, p_vol: float,
-        p_rho: float, nu: float, act_strength: float, multi: ti.i32,
+        s: ti.i32, so: ti.i32, n: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32, lx: ti.i32,
+        ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, dt: float,
+        p_vol: float, p_rho: float, nu: float, act_strength: float, multi: ti.i32,
     ):
         """Massively parallel variant of :func:`p2g` (GPU): one grid copy, atomic adds."""
         lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
         for p in range(n):
             _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, field, scratch, oscratch,
-                          nscratch, xscratch, s, p, 0, ny, nz, nx * ny * nz, lo, hi, dx, dt,
+                          nscratch, xscratch, s, so, p, 0, ny, nz, nx * ny * nz, lo, hi, dx, dt,
                           p_vol, p_rho, nu, act_strength, multi_, True)
 
     return p2g, p2g_atomic
@@ -274,7 +277,7 @@ def grid_op(
     scratch: nd(), grid_m: nd(), grid_vin: nd(), grid_v: nd(), boxes: nd(), clamp: nd(),
     oscratch: nd(), nscratch: nd(), xscratch: nd(), grid_om: nd(), grid_ovin: nd(),
     grid_ov: nd(), grid_r0: nd(), grid_o0: nd(), grid_gm: nd(), grid_og: nd(),
-    s: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
+    gs: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
     dx: float, dt: float, gravity: float, ground_y: float, mu_f: float, damp: float,
     multi: ti.i32, mu_c: float,
@@ -291,7 +294,7 @@ def grid_op(
     for i, j, k in ti.ndrange((lx, hx), (ly, hy), (lz, hz)):
         nxyz = nx * ny * nz
         o = _node(0, i, j, k, ny, nz, nxyz)  # this node in copy / substep 0
-        on = o + s * nxyz  # ... in substep s
+        on = o + gs * nxyz  # ... in grid slot gs
         acc = ti.Vector([0.0, 0.0, 0.0, 0.0])
         for c in range(chunks):
             acc += scratch[o + c * nxyz]
@@ -357,8 +360,9 @@ def _g2p_kernel(multi: bool):
     @ti.kernel
     def g2p(
         x: nd(), v: nd(), C: nd(), grid_v: nd(), glued: nd(), field: nd(), grid_ov: nd(),
-        s: ti.i32, n: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32, lx: ti.i32, ly: ti.i32,
-        lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, dt: float, multi: ti.i32,
+        s: ti.i32, so: ti.i32, gs: ti.i32, n: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
+        lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float,
+        dt: float, multi: ti.i32,
     ):
         """Gather APIC velocity and affine matrix, then advect (glued particles stay put);
         with ``multi`` the object particles gather from their own field ``grid_ov``."""
@@ -378,7 +382,7 @@ def _g2p_kernel(multi: bool):
             so0 = ti.Vector([0.0, 0.0, 0.0])
             so1 = ti.Vector([0.0, 0.0, 0.0])
             so2 = ti.Vector([0.0, 0.0, 0.0])
-            b = _node(s, base[0], base[1], base[2], ny, nz, nx * ny * nz)
+            b = _node(gs, base[0], base[1], base[2], ny, nz, nx * ny * nz)
             for i in ti.static(range(3)):
                 for j in ti.static(range(3)):
                     wij = w[i][0] * w[j][1]
@@ -395,9 +399,9 @@ def _g2p_kernel(multi: bool):
                         so2 = _step(so2, wg, k)
             new_C = (4.0 * inv_dx) * (ti.Matrix.cols([so0, so1, so2]) - new_v.outer_product(fx))
             keep = 1.0 - glued[p]
-            v[s + 1, p] = keep * new_v
-            C[s + 1, p] = keep * new_C
-            x[s + 1, p] = xp + (keep * dt) * new_v
+            v[so, p] = keep * new_v
+            C[so, p] = keep * new_C
+            x[so, p] = xp + (keep * dt) * new_v
 
     return g2p
 

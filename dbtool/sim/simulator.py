@@ -70,14 +70,16 @@ class Simulator:
         self.regions: list[Region] = []
         self.pool = pool = ArrayPool()
         g = requires_grad
-        self.state = State.allocate(pool, dtype, n, substeps + 1, grad=g)
+        # the substep slab: every substep's slot for the backward pass's replay, else the two
+        # alternating slots of a forward pass (Stepper.slots)
+        self.state = State.allocate(pool, dtype, n, substeps + 1 if g else 2, grad=g)
         self.checkpoints = State.allocate(pool, dtype, n, n_steps + 1 if g else 1,
                                           x_slots=n_steps + 1)
         self.start = State.allocate(pool, dtype, n, 1)  # the initial state, uploaded once
         self.body = Body.allocate(pool, dtype, n, n_steps, g)
         self.multi = multi = scene.object_friction is not None and particles.field is not None \
             and bool(np.any(np.asarray(particles.field) > 0))
-        self.grid = Grid.allocate(pool, dtype, scene.grid, chunks, substeps, multi)
+        self.grid = Grid.allocate(pool, dtype, scene.grid, chunks, substeps if g else 1, multi)
         self.stepper = Stepper(scene, self.mat, self.state, self.body, self.grid, pool, dtype,
                                substeps, atomic, chunks)
         self.np_dtype = self.stepper.np_dtype
@@ -183,7 +185,8 @@ class Simulator:
             self.set_actions(actions)
         EPISODES["forward"] += 1
         self._initial_state()
-        S, sp = self.substeps, self.stepper
+        sp = self.stepper
+        end = sp.end
         self.regions = []
         self._save(0, 0)
         lo, hi, vmax, _ = sp.measure(0)
@@ -191,8 +194,9 @@ class Simulator:
             self.regions.append(sp.region(lo, hi, vmax))
             sp.segment(t, self.regions[t])
             lo, hi, vmax = sp.check(t, self.regions[t])
-            self._save(S, t + 1)
-            self.state.copy_to(self.state, S, 0, self.n_sim)
+            self._save(end, t + 1)
+            if end != 0:
+                self.state.copy_to(self.state, end, 0, self.n_sim)
             if progress is not None:
                 progress(1)
 

@@ -95,31 +95,45 @@ class Stepper:
                 int(rows[:, 7].sum()))
 
     # ----------------------------------------------------------------- stepping
-    def substep_calls(self, s: int, r: Region, last: bool = False) -> list[Call]:
-        """The kernel calls of substep ``s``: slot ``s`` of the state to slot ``s + 1``
-        (``last`` skips g2p)."""
+    def slots(self, s: int, replay: bool) -> tuple[int, int, int]:
+        """State slot read, state slot written and grid slot of substep ``s``: its own
+        (``s``, ``s + 1``, ``s``) where the backward pass reads them (``replay``), else two
+        alternating state slots and one grid slot (a forward pass keeps only each control
+        step's end, and its arrays stay in the CPU's caches)."""
+        return (s, s + 1, s) if replay else (s % 2, (s + 1) % 2, 0)
+
+    @property
+    def end(self) -> int:
+        """The state slot where a forward segment ends."""
+        return self.substeps % 2
+
+    def substep_calls(self, s: int, r: Region, last: bool = False,
+                      replay: bool = False) -> list[Call]:
+        """The kernel calls of substep ``s`` (``last`` skips g2p), in the slots of
+        :meth:`slots`."""
         sc, m, st, g = self.scene, self.mat, self.state, self.grid
+        s, so, gs = self.slots(s, replay)
         multi, mu_c = g.multi, self.scene.object_friction or 0.0
         obj = bool(multi)  # the kernel variant: with or without a task object's own field
         if self.atomic:
-            p2g = (K.p2g_atomic[obj], (*st, *self.body.stress, *g.p2g, s, self.n, *self.dims,
-                                       *r, *self.consts, multi))
+            p2g = (K.p2g_atomic[obj], (*st, *self.body.stress, *g.p2g, s, so, self.n,
+                                       *self.dims, *r, *self.consts, multi))
         else:
-            p2g = (K.p2g[obj], (*st, *self.body.stress, *g.p2g, s, self.n, self.chunks,
+            p2g = (K.p2g[obj], (*st, *self.body.stress, *g.p2g, s, so, self.n, self.chunks,
                                 *self.dims, *r, *self.consts, multi))
         calls = [p2g, (K.grid_op, (
-            g.scratch, g.m, g.vin, g.v, self.boxes, g.clamp, *g.objects, s, self.chunks,
+            g.scratch, g.m, g.vin, g.v, self.boxes, g.clamp, *g.objects, gs, self.chunks,
             *self.dims, *r, sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction, sc.damp(m.dt),
             multi, mu_c))]
         if not last:
             calls.append((K.g2p[obj], (st.x, st.v, st.C, g.v, self.body.glued,
-                                       self.body.field, g.ov, s, self.n, *self.dims, *r,
+                                       self.body.field, g.ov, s, so, gs, self.n, *self.dims, *r,
                                        sc.dx, m.dt, multi)))
         return calls
 
-    def substep(self, s: int, r: Region, last: bool = False) -> None:
+    def substep(self, s: int, r: Region, last: bool = False, replay: bool = False) -> None:
         """Substep ``s`` (see :meth:`substep_calls`), launched kernel by kernel."""
-        for kernel, args in self.substep_calls(s, r, last):
+        for kernel, args in self.substep_calls(s, r, last, replay):
             kernel(*args)
 
     def segment(self, t: int, r: Region, replay: bool = False) -> None:
@@ -129,13 +143,14 @@ class Stepper:
         b = self.body
         calls: list[Call] = [(K.actuation, (b.wact, b.act, b.actp, t, self.n))]
         for s in range(self.substeps):
-            calls += self.substep_calls(s, r, last=replay and s == self.substeps - 1)
+            calls += self.substep_calls(s, r, last=replay and s == self.substeps - 1,
+                                        replay=replay)
         self.launcher.run(calls, key=("segment", replay, self.atomic))
 
     def check(self, t: int, r: Region) -> tuple[np.ndarray, np.ndarray, float]:
         """Fail loudly on NaN or on particles that outran the grid region of control step
         ``t``; returns the bounds at the segment's end."""
-        lo, hi, vmax, nan = self.measure(self.substeps)
+        lo, hi, vmax, nan = self.measure(self.end)
         dx = self.scene.dx
         inside = np.all(lo / dx - 0.5 >= np.array(r.lo)) and np.all(
             hi / dx - 0.5 < np.array(r.hi) - 2)
