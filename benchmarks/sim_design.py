@@ -6,7 +6,9 @@ occupancy is below the threshold have presence 0 (no mass, no stress) but stay i
 simulation, because the occupancy gradient passes straight through the threshold
 (docs/method.md §3, docs/baselines.md). On gripping the lattice is 11,832 particles per finger,
 mirrored, plus the glued base and the cube (28,848 in all); the baselines start from the
-reference finger, which occupies a fraction of it.
+reference finger, which occupies a fraction of it. The method ``diffusebot`` stands for what a
+design run simulates instead: the committed seed-0 DiffuseBot gripper
+(``exports/gripping-seed0/design.npz``), its active sites only.
 
 The workload: the gripping robot each ``--methods`` baseline starts from (seed 0); per robot a
 forward episode without gradients and a gradient episode (forward and backward), ``--steps``
@@ -43,6 +45,7 @@ from _versions import checkouts  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "sim-design.json"
 TASK = "gripping"
+DESIGN = ROOT / "exports" / "gripping-seed0" / "design.npz"
 
 
 def build_robots(methods: list[str], folder: Path) -> list[dict[str, Any]]:
@@ -53,7 +56,12 @@ def build_robots(methods: list[str], folder: Path) -> list[dict[str, Any]]:
     task = get_task(TASK)
     rows = []
     for i, method in enumerate(methods):
-        robot = make(method, task, seed=0).robot()
+        if method == "diffusebot":
+            from dbtool.design import Design
+
+            robot = Design.load(DESIGN).robot.compact()
+        else:
+            robot = make(method, task, seed=0).robot()
         path = folder / f"robot{i}.npz"
         np.savez(path, points=robot.points, occupancy=robot.occupancy,
                  stiffness=robot.stiffness, actuators=robot.actuators,
