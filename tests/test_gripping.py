@@ -154,6 +154,31 @@ def test_the_prescribed_controller_closes_the_fingers_on_the_cube():
     assert d[50:71].min() < d[50:56].max() - 5.0, "the second ramp does not close them again"
 
 
+def test_the_contact_box_leaves_the_episode_unchanged():
+    """Only robot particles whose stencils can share a node with the cube's scatter the
+    mass-weighted positions that the contact reads (``kernels.contact_box``): with every robot
+    particle scattering them, the block finger's episode, which squeezes and lifts the cube, is
+    bit-identical."""
+    from dbtool.sim.simulator import Simulator
+    from dbtool.sim.tasks import N_STEPS
+
+    task = get_task("gripping")
+    ep = task.episode(reference_robot(task, "box").compact())
+    out = []
+    for boxed in (True, False):
+        sim = Simulator(ep.scene, ep.particles, task.material, N_STEPS, requires_grad=False)
+        assert sim.stepper.object_span is not None
+        if not boxed:
+            sim.stepper.object_span = None
+        sim.forward(task.controller(N_STEPS))
+        out.append(sim.positions())
+        sim.release()
+    cube = ep.object_mask
+    lift = out[0][:, cube, 1].mean(1) - out[0][0, cube, 1].mean()
+    assert lift.max() * MM > 5.0, "the fingers never lifted the cube: no contact was tested"
+    assert np.array_equal(out[0], out[1])
+
+
 def test_a_block_finger_lifts_the_cube():
     """The block finger squeezes the cube off the ground and flings it up: its centre rises
     8.8 mm by step 80 while the fingers touch it and is 2.0 mm up, in flight, at the episode's

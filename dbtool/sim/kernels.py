@@ -24,7 +24,11 @@ A substep is ``stress -> p2g -> grid_op -> g2p``:
 * Contact (``multi``): a task object with its own velocity field scatters into and gathers
   from its own grid arrays; where it moves into the robot at a node, the contact of
   :mod:`dbtool.sim.boundaries` removes
-  the normal relative velocity with Coulomb friction (docs/method.md §3, "Contact").
+  the normal relative velocity with Coulomb friction (docs/method.md §3, "Contact"). The
+  robot's mass-weighted positions (the contact's separation test) are read only at nodes with
+  object mass, so only the robot particles whose stencils can share a node with the object's
+  in this substep (:func:`contact_box`, ``cbox``) scatter them; the others would only add to
+  nodes where they are never read.
 
 The arguments come in a fixed order, built by the containers of :mod:`dbtool.sim.state`:
 particle state ``(x, v, C, F)``, body fields ``(phi, E, actp, adir)``, grid arrays, the
@@ -152,8 +156,8 @@ def _p2g_particle(
     x: ti.template(), v: ti.template(), C: ti.template(), F: ti.template(), phi: ti.template(),
     E: ti.template(), actp: ti.template(), adir: ti.template(), damp: ti.template(),
     field: ti.template(), scratch: ti.template(), oscratch: ti.template(),
-    nscratch: ti.template(), xscratch: ti.template(), s, so, p, c, ny, nz, nxyz, lo, hi, dx,
-    dt, p_vol, p_rho, nu, act_strength, multi: ti.template(), atomic: ti.template(),
+    nscratch: ti.template(), xscratch: ti.template(), s, so, p, c, ny, nz, nxyz, lo, hi, blo,
+    bhi, dx, dt, p_vol, p_rho, nu, act_strength, multi: ti.template(), atomic: ti.template(),
 ):
     Cp = C[s, p]
     Fn = (ti.Matrix.identity(float, 3) + dt * Cp) @ F[s, p]
@@ -168,17 +172,19 @@ def _p2g_particle(
         Ap = _stress(Cp, Fn, ph, E[p], actp[p], adir[p], dx, dt, p_vol, p_rho, nu,
                      act_strength)
         _p2g_scatter(x, v, phi, damp, scratch, oscratch, nscratch, xscratch, Ap, obj, s, p, c,
-                     ny, nz, nxyz, lo, hi, dx, p_rho, p_vol, multi, atomic)
+                     ny, nz, nxyz, lo, hi, blo, bhi, dx, p_rho, p_vol, multi, atomic)
 
 
 @ti.func
 def _p2g_scatter(
     x: ti.template(), v: ti.template(), phi: ti.template(), damp: ti.template(),
     scratch: ti.template(), oscratch: ti.template(), nscratch: ti.template(),
-    xscratch: ti.template(), Ap, obj, s, p, c, ny, nz, nxyz, lo, hi, dx, p_rho, p_vol,
-    multi: ti.template(), atomic: ti.template(),
+    xscratch: ti.template(), Ap, obj, s, p, c, ny, nz, nxyz, lo, hi, blo, bhi, dx, p_rho,
+    p_vol, multi: ti.template(), atomic: ti.template(),
 ):
-    """Mass and APIC momentum of particle ``p`` onto its 27 nodes."""
+    """Mass and APIC momentum of particle ``p`` onto its 27 nodes; with ``multi`` a robot
+    particle whose first stencil node lies in ``[blo, bhi]`` (the contact box) also scatters its
+    mass-weighted position."""
     m_unit = p_rho * p_vol
     inv_dx = 1.0 / dx
     xp = x[s, p]
@@ -188,6 +194,11 @@ def _p2g_scatter(
     m = m_unit * phi[p]
     mv = (m * damp[p]) * v[s, p]
     b = _node(c, base[0], base[1], base[2], ny, nz, nxyz)
+    near = True  # can this particle's stencil share a node with the object's?
+    if ti.static(multi):
+        for d in ti.static(range(3)):
+            if base[d] < blo[d] or base[d] > bhi[d]:
+                near = False
     # The node momentum w (mv + A (off - fx) dx) is built up along the loops: with
     # q0 = mv - dx A fx and the columns a_d = dx A[:, d], it is w (q0 + i a0 + j a1 + k a2).
     q0 = mv - dx * (Ap @ fx)
@@ -213,7 +224,8 @@ def _p2g_scatter(
                                  ti.Vector([gw[0], gw[1], gw[2], mx[0], mx[1], mx[2]]), atomic)
                     else:
                         _scatter(scratch, o, val, atomic)
-                        _scatter(xscratch, o, (wt * m) * xp, atomic)
+                        if near:
+                            _scatter(xscratch, o, (wt * m) * xp, atomic)
                 else:
                     _scatter(scratch, o, val, atomic)
 
@@ -229,8 +241,9 @@ def _p2g_kernels(multi: bool) -> tuple:
         x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
         damp: nd(), field: nd(), scratch: nd(), oscratch: nd(), nscratch: nd(), xscratch: nd(),
         s: ti.i32, so: ti.i32, n: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
-        lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float,
-        dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float, multi: ti.i32,
+        lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, cbox: nd(),
+        dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
+        multi: ti.i32,
     ):
         """Stress, then scatter of mass and APIC momentum; ``chunks`` particle ranges go into
         separate grid copies with plain adds (one range per CPU thread). With ``multi`` the
@@ -238,6 +251,8 @@ def _p2g_kernels(multi: bool) -> tuple:
         mass gradient and mass-weighted positions into ``nscratch``; the robot's
         mass-weighted positions go into ``xscratch``."""
         lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+        blo = ti.Vector([cbox[0], cbox[1], cbox[2]])
+        bhi = ti.Vector([cbox[3], cbox[4], cbox[5]])
         for q in range(chunks * SPREAD):
             if q % SPREAD != 0:
                 continue
@@ -245,23 +260,25 @@ def _p2g_kernels(multi: bool) -> tuple:
             a, b = _range(c, chunks, n)
             for p in range(a, b):
                 _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, field, scratch, oscratch,
-                              nscratch, xscratch, s, so, p, c, ny, nz, nx * ny * nz, lo, hi, dx,
-                              dt, p_vol, p_rho, nu, act_strength, multi_, False)
+                              nscratch, xscratch, s, so, p, c, ny, nz, nx * ny * nz, lo, hi,
+                              blo, bhi, dx, dt, p_vol, p_rho, nu, act_strength, multi_, False)
 
     @ti.kernel
     def p2g_atomic(
         x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
         damp: nd(), field: nd(), scratch: nd(), oscratch: nd(), nscratch: nd(), xscratch: nd(),
         s: ti.i32, so: ti.i32, n: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32, lx: ti.i32,
-        ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, dt: float,
-        p_vol: float, p_rho: float, nu: float, act_strength: float, multi: ti.i32,
+        ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, cbox: nd(), dx: float,
+        dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float, multi: ti.i32,
     ):
         """Massively parallel variant of :func:`p2g` (GPU): one grid copy, atomic adds."""
         lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+        blo = ti.Vector([cbox[0], cbox[1], cbox[2]])
+        bhi = ti.Vector([cbox[3], cbox[4], cbox[5]])
         for p in range(n):
             _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, field, scratch, oscratch,
-                          nscratch, xscratch, s, so, p, 0, ny, nz, nx * ny * nz, lo, hi, dx, dt,
-                          p_vol, p_rho, nu, act_strength, multi_, True)
+                          nscratch, xscratch, s, so, p, 0, ny, nz, nx * ny * nz, lo, hi, blo,
+                          bhi, dx, dt, p_vol, p_rho, nu, act_strength, multi_, True)
 
     return p2g, p2g_atomic
 
@@ -410,6 +427,26 @@ g2p = {m: _g2p_kernel(m) for m in (False, True)}  # ``g2p[multi]``
 
 
 # --------------------------------------------------------------------------- bookkeeping
+@ti.kernel
+def contact_box(x: nd(), s: ti.i32, a: ti.i32, b: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32,
+                hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, out: nd()):
+    """The contact box of substep ``s``: the first stencil nodes (``out[0:3]`` to
+    ``out[3:6]``, inclusive) of the robot particles whose stencils can share a node with one of
+    the task object's particles ``[a, b)``, i.e. within 2 nodes of one of theirs. One thread:
+    an object has a few thousand particles."""
+    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
+    blo = hi
+    bhi = lo
+    ti.loop_config(serialize=True)
+    for p in range(a, b):
+        base = _base(x[s, p], 1.0 / dx, lo, hi)
+        blo = ti.min(blo, base)
+        bhi = ti.max(bhi, base)
+    for d in ti.static(range(3)):
+        out[d] = blo[d] - 2
+        out[3 + d] = bhi[d] + 2
+
+
 @ti.kernel
 def bounds(x: nd(), v: nd(), s: ti.i32, n: ti.i32, chunks: ti.i32, big: float, out: nd()):
     """Per chunk of particles ``c``: ``out[c] = (min x, y, z, max x, y, z, largest speed

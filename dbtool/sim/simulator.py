@@ -83,6 +83,10 @@ class Simulator:
         self.stepper = Stepper(scene, self.mat, self.state, self.body, self.grid, pool, dtype,
                                substeps, atomic, chunks)
         self.np_dtype = self.stepper.np_dtype
+        if multi:  # the task object's particles, when they are one run (every task's are)
+            obj = np.flatnonzero(np.asarray(self.q.field) > 0)
+            if obj[-1] - obj[0] + 1 == len(obj):
+                self.stepper.object_span = (int(obj[0]), int(obj[-1]) + 1)
         self.adjoint = Adjoint.allocate(pool, dtype, self.state, self.body, scene.grid,
                                         chunks, multi) if g else None
         self._upload()

@@ -72,6 +72,11 @@ class Stepper:
             boxes[b] = (*c, *h)
         self.boxes.from_numpy(boxes)
         self.launcher = Launcher(dtype)
+        # the task object's particles [a, b) when they are one run (set by the simulator), and
+        # the contact box p2g reads (K.contact_box; without an object run: every node)
+        self.object_span: tuple[int, int] | None = None
+        self.cbox = pool(ti.i32, (6,))
+        self.cbox.from_numpy(np.array([-2**30] * 3 + [2**30] * 3, np.int32))
 
     # ----------------------------------------------------------------- regions
     def region(self, lo: np.ndarray, hi: np.ndarray, vmax: float) -> Region:
@@ -117,11 +122,14 @@ class Stepper:
         obj = bool(multi)  # the kernel variant: with or without a task object's own field
         if self.atomic:
             p2g = (K.p2g_atomic[obj], (*st, *self.body.stress, *g.p2g, s, so, self.n,
-                                       *self.dims, *r, *self.consts, multi))
+                                       *self.dims, *r, self.cbox, *self.consts, multi))
         else:
             p2g = (K.p2g[obj], (*st, *self.body.stress, *g.p2g, s, so, self.n, self.chunks,
-                                *self.dims, *r, *self.consts, multi))
-        calls = [p2g, (K.grid_op, (
+                                *self.dims, *r, self.cbox, *self.consts, multi))
+        calls = []
+        if multi and self.object_span is not None:
+            calls.append((K.contact_box, (st.x, s, *self.object_span, *r, sc.dx, self.cbox)))
+        calls += [p2g, (K.grid_op, (
             g.scratch, g.m, g.vin, g.v, self.boxes, g.clamp, *g.objects, gs, self.chunks,
             *self.dims, *r, sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction, sc.damp(m.dt),
             multi, mu_c))]
