@@ -27,7 +27,8 @@ A substep is ``stress -> p2g -> grid_op -> g2p``:
   the normal relative velocity with Coulomb friction (docs/method.md §3, "Contact"). The
   robot's mass-weighted positions (the contact's separation test) are read only at nodes with
   object mass, so only the robot particles whose stencils can share a node with the object's
-  in this substep (:func:`contact_box`, ``cbox``) scatter them; the others would only add to
+  in this substep (:func:`dbtool.sim.slots.contact_box`, ``cbox``) scatter them; the others
+  would only add to
   nodes where they are never read.
 
 The arguments come in a fixed order, built by the containers of :mod:`dbtool.sim.state`:
@@ -424,53 +425,3 @@ def _g2p_kernel(multi: bool):
 
 
 g2p = {m: _g2p_kernel(m) for m in (False, True)}  # ``g2p[multi]``
-
-
-# --------------------------------------------------------------------------- bookkeeping
-@ti.kernel
-def contact_box(x: nd(), s: ti.i32, a: ti.i32, b: ti.i32, lx: ti.i32, ly: ti.i32, lz: ti.i32,
-                hx: ti.i32, hy: ti.i32, hz: ti.i32, dx: float, out: nd()):
-    """The contact box of substep ``s``: the first stencil nodes (``out[0:3]`` to
-    ``out[3:6]``, inclusive) of the robot particles whose stencils can share a node with one of
-    the task object's particles ``[a, b)``, i.e. within 2 nodes of one of theirs. One thread:
-    an object has a few thousand particles."""
-    lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
-    blo = hi
-    bhi = lo
-    ti.loop_config(serialize=True)
-    for p in range(a, b):
-        base = _base(x[s, p], 1.0 / dx, lo, hi)
-        blo = ti.min(blo, base)
-        bhi = ti.max(bhi, base)
-    for d in ti.static(range(3)):
-        out[d] = blo[d] - 2
-        out[3 + d] = bhi[d] + 2
-
-
-@ti.kernel
-def bounds(x: nd(), v: nd(), s: ti.i32, n: ti.i32, chunks: ti.i32, big: float, out: nd()):
-    """Per chunk of particles ``c``: ``out[c] = (min x, y, z, max x, y, z, largest speed
-    component, NaN count)`` of slot ``s``, each chunk on its own thread (no shared atomics);
-    the caller reduces over the chunks."""
-    for q in range(chunks * SPREAD):
-        if q % SPREAD != 0:
-            continue
-        c = q // SPREAD
-        a, b = _range(c, chunks, n)
-        lo = ti.Vector([big, big, big])
-        hi = -lo
-        vmax = 0.0
-        nan = 0.0
-        for p in range(a, b):
-            xp = x[s, p]
-            vp = v[s, p]
-            lo = ti.min(lo, xp)
-            hi = ti.max(hi, xp)
-            vmax = ti.max(vmax, ti.abs(vp).max())
-            if not (xp.norm_sqr() >= 0.0 and vp.norm_sqr() >= 0.0):
-                nan += 1.0
-        for d in ti.static(range(3)):
-            out[c, d] = lo[d]
-            out[c, 3 + d] = hi[d]
-        out[c, 6] = vmax
-        out[c, 7] = nan

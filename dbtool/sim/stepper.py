@@ -19,6 +19,7 @@ from dbtool.sim import kernels as K
 from dbtool.sim.boundaries import MAX_BOXES
 from dbtool.sim.graphs import Call, Launcher
 from dbtool.sim.model import Material, Scene
+from dbtool.sim.slots import bounds, contact_box
 from dbtool.sim.state import ArrayPool, Body, Constants, Grid, State
 
 
@@ -73,7 +74,7 @@ class Stepper:
         self.boxes.from_numpy(boxes)
         self.launcher = Launcher(dtype)
         # the task object's particles [a, b) when they are one run (set by the simulator), and
-        # the contact box p2g reads (K.contact_box; without an object run: every node)
+        # the contact box p2g reads (contact_box; without an object run: every node)
         self.object_span: tuple[int, int] | None = None
         self.cbox = pool(ti.i32, (6,))
         self.cbox.from_numpy(np.array([-2**30] * 3 + [2**30] * 3, np.int32))
@@ -94,7 +95,7 @@ class Stepper:
         """Per-axis particle bounds, the largest speed component and the NaN count at slot
         ``s`` of the state."""
         big = float(np.finfo(self.np_dtype).max)
-        K.bounds(self.state.x, self.state.v, s, self.n, self.bound_chunks, big, self.bbox)
+        bounds(self.state.x, self.state.v, s, self.n, self.bound_chunks, big, self.bbox)
         rows = self.bbox.to_numpy().astype(np.float64)
         return (rows[:, :3].min(0), rows[:, 3:6].max(0), float(rows[:, 6].max()),
                 int(rows[:, 7].sum()))
@@ -128,7 +129,7 @@ class Stepper:
                                 *self.dims, *r, self.cbox, *self.consts, multi))
         calls = []
         if multi and self.object_span is not None:
-            calls.append((K.contact_box, (st.x, s, *self.object_span, *r, sc.dx, self.cbox)))
+            calls.append((contact_box, (st.x, s, *self.object_span, *r, sc.dx, self.cbox)))
         calls += [p2g, (K.grid_op, (
             g.scratch, g.m, g.vin, g.v, self.boxes, g.clamp, *g.objects, gs, self.chunks,
             *self.dims, *r, sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction, sc.damp(m.dt),
