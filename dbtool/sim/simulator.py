@@ -135,6 +135,10 @@ class Simulator:
         """The stepped particles' rows of a per-particle array."""
         return a if self.moving is None else a[self.moving]
 
+    def _held_x(self) -> np.ndarray:
+        """The glued particles' positions (their ``x0``: they never move)."""
+        return np.asarray(self.p.x0)[np.asarray(self.p.glued) > 0].astype(self.np_dtype)
+
     def _every(self, a: np.ndarray, glued: np.ndarray | float = 0.0) -> np.ndarray:
         """A per-particle array of the stepped particles (particle axis 1 when ``a`` has a
         leading axis of slots) widened to every particle, ``glued`` in the glued rows."""
@@ -207,13 +211,11 @@ class Simulator:
     # ----------------------------------------------------------------- outputs
     def positions(self) -> np.ndarray:
         """Particle positions at every control step, shape ``(n_steps + 1, N, 3)``."""
-        glued_x0 = self.p.x0 if self.moving is None else self.p.x0[self.p.glued > 0]
-        return self._every(self.checkpoints.x.to_numpy(), glued_x0.astype(self.np_dtype))
+        return self._every(self.checkpoints.x.to_numpy(), self._held_x())
 
     def final_state(self) -> dict[str, np.ndarray]:
         """Positions and velocities after the last control step."""
-        x0 = self.p.x0 if self.moving is None else self.p.x0[self.p.glued > 0]
-        return {"x": self._every(self.state.x.to_numpy()[0], x0.astype(self.np_dtype)),
+        return {"x": self._every(self.state.x.to_numpy()[0], self._held_x()),
                 "v": self._every(self.state.v.to_numpy()[0])}
 
     def backward(self, grad_x: np.ndarray, grad_v: np.ndarray | None = None,
