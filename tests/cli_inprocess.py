@@ -17,7 +17,7 @@ from pathlib import Path
 from typer.testing import CliRunner
 
 from dbtool.cli import app
-from dbtool.cli_compare import expand_list_options
+from dbtool.cli.compare import expand_list_options
 
 
 def run_cli(*args: str, cwd: str | Path | None = None) -> subprocess.CompletedProcess:

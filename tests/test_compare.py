@@ -23,7 +23,7 @@ import pytest
 import torch
 from cli_inprocess import run_cli
 
-from dbtool.cli_compare import expand_list_options
+from dbtool.cli.compare import expand_list_options
 from dbtool.compare.budget import BUDGETS, GRAD_COST, get_budget, gradient_iterations, used
 from dbtool.compare.methods import GRADIENT, METHODS, TITLES, diffusebot_configs, diffusebot_plan
 from dbtool.design import Design

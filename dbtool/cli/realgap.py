@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from dbtool.cli_common import guarded
+from dbtool.cli.common import guarded
 
 realgap_app = typer.Typer(no_args_is_help=True,
                           help="Sim vs real: the gripper's tendon protocol (Figure 16).")

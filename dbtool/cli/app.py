@@ -6,11 +6,11 @@ from pathlib import Path
 
 import typer
 
-from dbtool.cli_common import ProgressBar, guarded
-from dbtool.cli_compare import compare_command
-from dbtool.cli_export import export_command
-from dbtool.cli_prior import prior_app
-from dbtool.cli_realgap import realgap_app
+from dbtool.cli.common import ProgressBar, guarded
+from dbtool.cli.compare import compare_command
+from dbtool.cli.export import export_command
+from dbtool.cli.prior import prior_app
+from dbtool.cli.realgap import realgap_app
 from dbtool.codesign.config import PROMPT_T_MIN
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
@@ -191,11 +191,9 @@ def main() -> None:
     """The ``dbtool`` console command; ``compare`` also takes space-separated lists."""
     import sys
 
-    from dbtool.cli_compare import expand_list_options
+    from dbtool.cli.compare import expand_list_options
 
     sys.argv[1:] = expand_list_options(sys.argv[1:])
     app()
 
 
-if __name__ == "__main__":  # pragma: no cover
-    main()

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from dbtool.cli_common import guarded
+from dbtool.cli.common import guarded
 
 prior_app = typer.Typer(no_args_is_help=True, help="Train, export and evaluate the prior.")
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from dbtool.cli_common import guarded
+from dbtool.cli.common import guarded
 
 LIST_OPTIONS = ("--tasks", "--methods", "--seeds")
 
