@@ -15,6 +15,8 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from dbtool.errors import NotAFolderError, PathError
+
 
 def _umask() -> int:
     mask = os.umask(0)
@@ -59,12 +61,12 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
     path = Path(path)
     for above in reversed(path.parents):  # outermost first: name the file that is in the way
         if above.exists() and not above.is_dir():
-            raise NotADirectoryError(f"cannot make the folder {path}: {above} is a file")
+            raise NotAFolderError(f"cannot make the folder {path}: {above} is a file")
     path.parent.mkdir(parents=True, exist_ok=True)
     if not os.access(path.parent, os.W_OK):
-        raise PermissionError(f"cannot write to {path.parent}")
+        raise PathError(f"cannot write to {path.parent}")
     if path.exists() and not path.is_dir():
-        raise NotADirectoryError(f"{path} is a file, not a folder")
+        raise NotAFolderError(f"{path} is a file, not a folder")
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.partial-", dir=path.parent))
     try:
         os.chmod(tmp, 0o777 & ~_umask())
@@ -90,9 +92,9 @@ def check_writable(path: str | Path, folder: bool = False) -> Path:
     while not probe.exists():
         probe = probe.parent
     if not probe.is_dir():
-        raise OSError(f"cannot write {path}: {probe} is not a folder")
+        raise PathError(f"cannot write {path}: {probe} is not a folder")
     if not os.access(probe, os.W_OK | os.X_OK):
-        raise OSError(f"cannot write {path}: {probe} is not writable")
+        raise PathError(f"cannot write {path}: {probe} is not writable")
     if not folder and path.is_dir():
-        raise OSError(f"cannot write {path}: it is a folder")
+        raise PathError(f"cannot write {path}: it is a folder")
     return path

@@ -15,13 +15,14 @@ from pathlib import Path
 import numpy as np
 
 from dbtool.atomic import atomic_write
+from dbtool.errors import InputError
 from dbtool.sim.robot import Robot
 
 FORMAT = "dbtool.design/1"
 _ARRAYS = ("surface", "points", "occupancy", "stiffness", "actuators", "directions", "controller")
 
 
-class DesignFileError(ValueError):
+class DesignFileError(InputError):
     """A design file is missing, unreadable or malformed."""
 
 

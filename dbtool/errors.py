@@ -16,8 +16,16 @@ class InputError(DbtoolError, ValueError):
     """An option, a file's content or a configuration value that dbtool cannot use."""
 
 
-class MissingFileError(DbtoolError, FileNotFoundError):
+class PathError(DbtoolError, OSError):
+    """A path the user named (or that a run writes to) cannot be read or written."""
+
+
+class MissingFileError(PathError, FileNotFoundError):
     """A file or folder the user named (or that a run needs) does not exist."""
+
+
+class NotAFolderError(PathError, NotADirectoryError):
+    """A path that should be (or lie inside) a folder is a file."""
 
 
 class RunError(DbtoolError, RuntimeError):

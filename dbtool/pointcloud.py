@@ -12,9 +12,10 @@ from pathlib import Path
 import numpy as np
 
 from dbtool.atomic import atomic_write_bytes
+from dbtool.errors import InputError
 
 
-class CloudFileError(ValueError):
+class CloudFileError(InputError):
     """A cloud file is missing, unreadable or holds no usable points."""
 
 
@@ -22,7 +23,7 @@ def save_ply(points: np.ndarray, path: str | Path) -> Path:
     """Write one ``(n, 3)`` cloud as a binary little-endian PLY of float32 vertices."""
     pts = np.ascontiguousarray(points, dtype="<f4")
     if pts.ndim != 2 or pts.shape[1] != 3:
-        raise ValueError(f"a cloud must have shape (n, 3), got {pts.shape}")
+        raise InputError(f"a cloud must have shape (n, 3), got {pts.shape}")
     header = ("ply\nformat binary_little_endian 1.0\ncomment dbtool point cloud, y up\n"
               f"element vertex {len(pts)}\nproperty float x\nproperty float y\n"
               "property float z\nend_header\n").encode()

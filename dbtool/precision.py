@@ -13,6 +13,8 @@ import functools
 import os
 from pathlib import Path
 
+from dbtool.errors import InputError
+
 NATIVE_FLAGS = ("avx512_bf16", "amx_bf16")  # /proc/cpuinfo flags of native bfloat16 units
 
 
@@ -43,7 +45,7 @@ def native_bf16() -> bool:
     env = os.environ.get("DBTOOL_BF16", "").strip().lower()
     if env:
         if env not in ("0", "1", "true", "false", "yes", "no"):
-            raise ValueError(f"DBTOOL_BF16={env!r}: use 1 or 0")
+            raise InputError(f"DBTOOL_BF16={env!r}: use 1 or 0")
         return env in ("1", "true", "yes")
     return bool(set(NATIVE_FLAGS) & cpu_flags())
 

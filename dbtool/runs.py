@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from dbtool.atomic import atomic_write_text
+from dbtool.errors import InputError
 from dbtool.provenance import json_default, provenance
 
 
@@ -45,16 +46,16 @@ def find_design(run_dir: str | Path | None = None, design: str | Path | None = N
     """The design file a command works on: ``run_dir/design.npz``, the file ``design``, or
     the newest under ``root``. ``ValueError`` when there is none or both are given."""
     if run_dir is not None and design is not None:
-        raise ValueError("give a run directory or --design FILE, not both")
+        raise InputError("give a run directory or --design FILE, not both")
     if run_dir is not None:
         path = Path(run_dir) / "design.npz"
         if not path.is_file():
-            raise ValueError(f"{run_dir} holds no design.npz (is it a finished `dbtool design` "
+            raise InputError(f"{run_dir} holds no design.npz (is it a finished `dbtool design` "
                              "run?)")
         return path
     found = Path(design) if design is not None else latest_design(root)
     if found is None:
-        raise ValueError(f"no design found under {root}/; run `dbtool design TASK` or pass "
+        raise InputError(f"no design found under {root}/; run `dbtool design TASK` or pass "
                          "--design FILE")
     return found
 

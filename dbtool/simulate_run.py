@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dbtool.errors import InputError
 from dbtool.robotize.actuators import reference_robot
 from dbtool.sim.bodies import SHAPES
 from dbtool.sim.tasks import N_STEPS, SUBSTEPS, Task, get_task
@@ -40,12 +41,12 @@ class SimulateConfig:
     def __post_init__(self) -> None:
         self.task = get_task(self.task).name
         if self.controller not in CONTROLLERS:
-            raise ValueError(f"unknown controller {self.controller!r}; choose prescribed, none "
+            raise InputError(f"unknown controller {self.controller!r}; choose prescribed, none "
                              "or design")
         if self.steps < 1:
-            raise ValueError(f"steps must be at least 1, got {self.steps}")
+            raise InputError(f"steps must be at least 1, got {self.steps}")
         if self.design is None and self.shape not in SHAPES:
-            raise ValueError(f"unknown shape {self.shape!r}; choose one of {', '.join(SHAPES)}")
+            raise InputError(f"unknown shape {self.shape!r}; choose one of {', '.join(SHAPES)}")
 
     def resolved(self) -> dict:
         """The run's ``config.json``."""
@@ -89,7 +90,7 @@ def simulate_run(cfg: SimulateConfig, out: str | Path | None = None,
     if cfg.design is not None:
         design = Design.load(cfg.design)
         if design.task != task.name:
-            raise ValueError(f"design {cfg.design} was made for task {design.task!r}, not "
+            raise InputError(f"design {cfg.design} was made for task {design.task!r}, not "
                              f"{task.name!r}")
         robot = design.robot.compact()
     else:
@@ -114,7 +115,7 @@ def _actions(cfg: SimulateConfig, task: Task, design) -> np.ndarray:
         return task.controller(cfg.steps)
     if cfg.controller == "design":
         if design is None or len(design.controller) < cfg.steps:
-            raise ValueError("--controller design needs a --design whose controller covers "
+            raise InputError("--controller design needs a --design whose controller covers "
                              "the steps")
         return design.controller[: cfg.steps]
     return task.controller(cfg.steps) * 0.0

@@ -9,6 +9,7 @@ from dbtool.baselines.implicit import ImplicitRepresentation
 from dbtool.baselines.particle import ParticleRepresentation
 from dbtool.baselines.representation import Representation
 from dbtool.baselines.voxel import VoxelRepresentation
+from dbtool.errors import InputError
 from dbtool.sim.tasks import Task
 
 REPRESENTATIONS: dict[str, type[Representation]] = {
@@ -23,6 +24,6 @@ def make(name: str, task: Task, seed: int = 0, points: np.ndarray | None = None
          ) -> Representation:
     """The representation ``name`` of ``task``, initialised at the reference body."""
     if name not in REPRESENTATIONS:
-        raise ValueError(f"unknown representation {name!r}; choose "
+        raise InputError(f"unknown representation {name!r}; choose "
                          f"{', '.join(REPRESENTATIONS)}")
     return REPRESENTATIONS[name](task, seed=seed, points=points)

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from dbtool.baselines.features import DEFAULT_BODY
+from dbtool.errors import InputError
 from dbtool.robotize.actuators import reference_robot
 from dbtool.sim.tasks import N_STEPS, get_task
 
@@ -20,7 +21,7 @@ METHODS = ("diffusebot", "particle")  # what `dbtool design --method` accepts
 def check_method(method: str) -> str:
     """``method`` if it names a design method, else ``ValueError``."""
     if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; choose {' or '.join(METHODS)}")
+        raise InputError(f"unknown method {method!r}; choose {' or '.join(METHODS)}")
     return method
 
 
@@ -37,9 +38,9 @@ class ParticleRunConfig:
     def __post_init__(self) -> None:
         self.task = get_task(self.task).name
         if self.iterations < 0:
-            raise ValueError(f"iterations must be at least 0, got {self.iterations}")
+            raise InputError(f"iterations must be at least 0, got {self.iterations}")
         if self.steps < 1:
-            raise ValueError(f"steps must be at least 1, got {self.steps}")
+            raise InputError(f"steps must be at least 1, got {self.steps}")
 
     @property
     def shape(self) -> str:

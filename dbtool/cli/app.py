@@ -52,10 +52,9 @@ def simulate(
     gif: bool = typer.Option(True, help="also write an animated GIF"),
 ) -> None:
     """Simulate one body on a task; print the metric, write a montage PNG and a GIF."""
-    from dbtool.sim.simulator import SimulationError
     from dbtool.simulate_run import SimulateConfig, simulate_run
 
-    with guarded(SimulationError, FloatingPointError):
+    with guarded():
         cfg = SimulateConfig(task, shape, design, controller, steps, seed, arch, gif)
         with ProgressBar(steps, cfg.task, "step") as bar:
             res = simulate_run(cfg, out, progress=bar.update)
@@ -94,10 +93,9 @@ def design(
     from dbtool.baselines.run import ParticleRunConfig, check_method, particle_run
     from dbtool.codesign.design_run import Settings
     from dbtool.codesign.launch import open_design_run
-    from dbtool.sim.simulator import SimulationError
     from dbtool.sim.tasks import get_task
 
-    with guarded(SimulationError, FloatingPointError):
+    with guarded():
         if check_method(method) == "particle":
             cfg = ParticleRunConfig(task, iterations, steps, seed, arch)
             with ProgressBar(iterations, f"design {cfg.task}", "iter") as bar:
@@ -168,9 +166,9 @@ def generate(
                                                       "runs/generate-TIME)"),
 ) -> None:
     """Sample point clouds from the prior: .ply per sample, samples.npz and grid.png."""
-    from dbtool.prior.generate import GenerateSettings, check_prompts, far_prompt_note
-    from dbtool.prior.generate import generate as run_generate
-    from dbtool.prior.pipeline import Prior
+    from dbtool.prior.sampling.generate import GenerateSettings, check_prompts, far_prompt_note
+    from dbtool.prior.sampling.generate import generate as run_generate
+    from dbtool.prior.sampling.pipeline import Prior
     from dbtool.runs import default_run_dir
 
     settings = GenerateSettings(n, guidance, steps, seed, upsample, eta)

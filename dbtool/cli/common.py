@@ -8,6 +8,8 @@ from contextlib import contextmanager
 
 import typer
 
+from dbtool.errors import DbtoolError
+
 
 def fail(message: str) -> None:
     """Print ``error: message`` on stderr and exit with code 2."""
@@ -17,11 +19,16 @@ def fail(message: str) -> None:
 
 @contextmanager
 def guarded(*errors: type[BaseException]) -> Iterator[None]:
-    """Bad input (the library's ``ValueError`` and ``OSError`` families, and ``errors``)
-    becomes one ``error:`` line and exit code 2."""
+    """An error the user can fix becomes one ``error:`` line and exit code 2: a
+    :class:`~dbtool.errors.DbtoolError`, a file-system error on a named path (an ``OSError``
+    that carries its ``filename``: a missing, unreadable or unwritable file), and ``errors``.
+    Everything else is a bug and keeps its traceback."""
     try:
         yield
-    except (ValueError, OSError, *errors) as exc:
+    except (DbtoolError, OSError, *errors) as exc:
+        if isinstance(exc, OSError) and not isinstance(exc, DbtoolError) \
+                and exc.filename is None and not isinstance(exc, errors):
+            raise
         fail(str(exc))
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 
 from dbtool.cli.common import guarded
+from dbtool.errors import InputError
 
 LIST_OPTIONS = ("--tasks", "--methods", "--seeds")
 
@@ -49,13 +50,12 @@ def compare_command(
 ) -> None:
     """Run the methods x tasks x seeds table: one folder per cell, results.csv, table.md,
     bar chart and the Figure-12 grid of robots."""
-    from dbtool.compare.executors import ExecutorError
     from dbtool.compare.run import CompareConfig, compare, stored_config
     from dbtool.runs import default_run_dir
 
-    with guarded(ExecutorError):
+    with guarded():
         if resume and out is None:
-            raise ValueError("--resume needs --out, the comparison folder to finish")
+            raise InputError("--resume needs --out, the comparison folder to finish")
         base = stored_config(out) if resume else {}
         cfg = CompareConfig(
             tasks=list(tasks) if tasks else base.get("tasks", ["all"]),

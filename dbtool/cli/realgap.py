@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 
 from dbtool.cli.common import guarded
+from dbtool.errors import InputError
 
 realgap_app = typer.Typer(no_args_is_help=True,
                           help="Sim vs real: the gripper's tendon protocol (Figure 16).")
@@ -81,7 +82,7 @@ def realgap_calibrate(
     with guarded():
         unknown = [n for n in names if n not in BOUNDS]
         if unknown or not names:
-            raise ValueError(f"--fit: unknown parameter(s) {', '.join(unknown) or '(none)'}; "
+            raise InputError(f"--fit: unknown parameter(s) {', '.join(unknown) or '(none)'}; "
                              f"choose from {', '.join(BOUNDS)}")
 
         def show(h: dict) -> None:

@@ -20,7 +20,8 @@ import torch
 
 from dbtool.codesign.buffer import Buffer, Entry
 from dbtool.codesign.config import EmbeddingConfig
-from dbtool.prior.diffusion import SCALE, guided_eps
+from dbtool.errors import InputError
+from dbtool.prior.sampling.diffusion import SCALE, guided_eps
 from dbtool.robotize import RobotizeError, evaluate
 from dbtool.sim.simulator import SimulationError
 from dbtool.sim.tasks import N_STEPS, Task
@@ -88,12 +89,12 @@ def caption_atoms(corpus: int = 1) -> tuple[tuple[str, ...], torch.Tensor]:
     """One caption per family of corpus ``corpus`` ("a ball", "a star", ..., on the attribute
     corpus "a block with four legs") and their embeddings: the conditions the prior was
     trained on (its family prompts, docs/prior.md)."""
-    from dbtool.prior.evaluate import prompt_of
-    from dbtool.prior.text import encode
-    from dbtool.prior.train import corpus_module
+    from dbtool.prior.training.evaluate import prompt_of
+    from dbtool.prior.sampling.text import encode
+    from dbtool.prior.training.train import corpus_module
 
     if corpus == 1:
-        from dbtool.prior.shapes import FAMILIES, make_shape
+        from dbtool.prior.corpora.shapes import FAMILIES, make_shape
 
         names = tuple(make_shape(f, 0, "train", 0, 64).caption for f in FAMILIES)
     else:
@@ -120,7 +121,7 @@ class Embedding(torch.nn.Module):
                  start_weight: float = 0.9, corpus: int = 1) -> None:
         super().__init__()
         if space not in SPACES:
-            raise ValueError(f"unknown embedding space {space!r}; choose one of "
+            raise InputError(f"unknown embedding space {space!r}; choose one of "
                              f"{', '.join(SPACES)}")
         self.space = space
         start = start.detach().reshape(1, -1).float()
@@ -173,7 +174,7 @@ def mixture_step(emb: Embedding, opt: torch.optim.Optimizer, entries: list[Entry
     idx = torch.randint(len(entries), (batch_size,), generator=gen).tolist()
     k = torch.as_tensor([entries[i].atom for i in idx])
     if bool((k < 0).any()):
-        raise ValueError("mixture training needs designs that record their atom")
+        raise InputError("mixture training needs designs that record their atom")
     loss = -torch.log_softmax(emb.w, 0)[k].mean()
     opt.zero_grad()
     loss.backward()

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+from dbtool.errors import InputError
+
 GRAD_COST = 4.0
 
 
@@ -46,7 +48,7 @@ BUDGETS = {
 
 def get_budget(name: str) -> Budget:
     if name not in BUDGETS:
-        raise ValueError(f"unknown budget {name!r}; choose one of {', '.join(BUDGETS)}")
+        raise InputError(f"unknown budget {name!r}; choose one of {', '.join(BUDGETS)}")
     return BUDGETS[name]
 
 

@@ -25,6 +25,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from dbtool.atomic import atomic_write_text
+from dbtool.errors import InputError
 
 CELL_FILE = "cell.json"
 
@@ -140,7 +141,7 @@ def copy_cell(source: CellSpec, spec: CellSpec) -> dict:
     the units the method spent and names its source in ``copied_from``, with no wall time."""
     record = read_cell(source.folder)
     if record is None or record.get("status") != "done":
-        raise ValueError(f"cell {source.name} is not finished: nothing to copy")
+        raise InputError(f"cell {source.name} is not finished: nothing to copy")
     folder = spec.folder
     folder.mkdir(parents=True, exist_ok=True)
     (folder / CELL_FILE).unlink(missing_ok=True)

@@ -13,17 +13,18 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 
 from dbtool.compare.cells import CellSpec, run_cell, worker_init
+from dbtool.errors import InputError, RunError
 
 EXECUTORS = ("serial", "local", "ray")
 
 
-class ExecutorError(RuntimeError):
+class ExecutorError(RunError):
     """The executor cannot start (missing extra, unreachable cluster)."""
 
 
 def check_executor(name: str) -> str:
     if name not in EXECUTORS:
-        raise ValueError(f"unknown executor {name!r}; choose one of {', '.join(EXECUTORS)}")
+        raise InputError(f"unknown executor {name!r}; choose one of {', '.join(EXECUTORS)}")
     return name
 
 

@@ -24,6 +24,7 @@ import numpy as np  # noqa: E402
 from dbtool.atomic import atomic_write_text  # noqa: E402
 from dbtool.compare.methods import TITLES  # noqa: E402
 from dbtool.design import Design, DesignFileError  # noqa: E402
+from dbtool.errors import InputError, MissingFileError
 from dbtool.sim.tasks import TASKS as TASK_CLASSES  # noqa: E402
 from dbtool.sim.tasks import get_task  # noqa: E402
 from dbtool.viz.clouds import save_figure  # noqa: E402
@@ -48,12 +49,12 @@ def _number(text: str, kind: type, name: str, where: str) -> float | int:
             return 0
         if kind is float:
             return math.nan
-        raise ValueError(f"{where}: empty {name}")
+        raise InputError(f"{where}: empty {name}")
     try:
         return kind(text)
     except ValueError:
         what = "an integer" if kind is int else "a number"
-        raise ValueError(f"{where}: {name} {text!r} is not {what}") from None
+        raise InputError(f"{where}: {name} {text!r} is not {what}") from None
 
 
 def read_results(path: str | Path) -> list[dict]:
@@ -62,34 +63,34 @@ def read_results(path: str | Path) -> list[dict]:
     Raises ``ValueError`` (one line naming the file) for a missing or malformed file."""
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"results file not found: {path}")
+        raise MissingFileError(f"results file not found: {path}")
     try:
         with open(path, newline="") as fh:
             reader = csv.DictReader(fh)
             header = reader.fieldnames or []
             missing = [c for c in COLUMNS if c not in header]
             if missing:
-                raise ValueError(f"{path}: not a comparison results table (missing columns "
+                raise InputError(f"{path}: not a comparison results table (missing columns "
                                  f"{', '.join(missing)})")
             raw = list(reader)
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise ValueError(f"cannot read results file {path}: {exc}") from None
+        raise InputError(f"cannot read results file {path}: {exc}") from None
     rows = []
     for k, rec in enumerate(raw):
         where = f"{path}: line {k + 2}"
         if None in rec or any(rec[c] is None for c in COLUMNS):
-            raise ValueError(f"{where}: expected {len(header)} fields")
+            raise InputError(f"{where}: expected {len(header)} fields")
         row: dict = {c: rec[c].strip() for c in COLUMNS}
         for c in _INTS:
             row[c] = _number(rec[c], int, c, where)
         for c in _FLOATS:
             row[c] = _number(rec[c], float, c, where)
         if not row["method"] or not row["task"]:
-            raise ValueError(f"{where}: empty method or task")
+            raise InputError(f"{where}: empty method or task")
         if row["status"] not in STATUSES:
-            raise ValueError(f"{where}: status {row['status']!r} is not done or failed")
+            raise InputError(f"{where}: status {row['status']!r} is not done or failed")
         if row["status"] == "done" and not math.isfinite(row["metric"]):
-            raise ValueError(f"{where}: a done cell without a finite metric")
+            raise InputError(f"{where}: a done cell without a finite metric")
         rows.append(row)
     return rows
 
@@ -211,7 +212,7 @@ def bar_chart(rows: list[dict], path: str | Path, dpi: int = 100) -> Path:
     s = summarise(rows)
     methods, tasks, cells = s["methods"], s["tasks"], s["cells"]
     if not tasks:
-        raise ValueError("no cells to plot")
+        raise InputError("no cells to plot")
     nr, nc = _grid_shape(len(tasks))
     fig, axes = plt.subplots(nr, nc, figsize=(3.6 * nc, 3.2 * nr), squeeze=False)
     colours = plt.get_cmap("tab10").colors
@@ -283,7 +284,7 @@ def robot_grid(out_dir: str | Path, rows: list[dict], path: str | Path,
     s = summarise(rows)
     methods, tasks = s["methods"], s["tasks"]
     if not tasks:
-        raise ValueError("no cells to draw")
+        raise InputError("no cells to draw")
     pick = grid_cells(rows, seed)
     fig = plt.figure(figsize=(size * len(tasks) + 0.8, size * len(methods) + 0.4))
     fig.subplots_adjust(left=0.8 / (size * len(tasks) + 0.8), right=0.99, bottom=0.01,
@@ -318,7 +319,7 @@ def write_report(out_dir: str | Path) -> dict[str, Path]:
     csv_path = out_dir / "results.csv"
     rows = read_results(csv_path)
     if not rows:
-        raise ValueError(f"{csv_path} has no cells to report")
+        raise InputError(f"{csv_path} has no cells to report")
     return {
         "table": atomic_write_text(out_dir / "table.md", table_markdown(rows)),
         "bars": bar_chart(rows, out_dir / "bars.png"),

@@ -27,6 +27,7 @@ from dbtool.compare.budget import get_budget
 from dbtool.compare.cells import CellSpec, copy_cell, read_cell
 from dbtool.compare.executors import check_executor, execute
 from dbtool.compare.methods import METHODS, seeded
+from dbtool.errors import InputError
 from dbtool.sim.tasks import TASKS
 
 FORMAT = "dbtool.compare/1"
@@ -34,7 +35,7 @@ COLUMNS = ("method", "task", "seed", "status", "metric", "budget_units", "budget
            "forward_episodes", "gradient_episodes", "wall_s", "worker", "commit", "error")
 
 
-class CompareError(ValueError):
+class CompareError(InputError):
     """Bad options or a folder that cannot be used; the message is one line."""
 
 

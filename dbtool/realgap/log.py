@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from dbtool.atomic import atomic_write_text
+from dbtool.errors import InputError
 
 TENDONS = ("flexion", "extension")
 PHASES = ("pull", "release")
@@ -29,7 +30,7 @@ _META = re.compile(r"#\s*([A-Za-z_][\w.-]*)\s*:(.*)$")
 _UNIT = re.compile(r"(displacement|tip_distance)(?:_([A-Za-z]+))?$")
 
 
-class LogError(ValueError):
+class LogError(InputError):
     """A malformed log; the message is one line that names the line of the file."""
 
 
@@ -48,7 +49,7 @@ class Curve:
         self.displacement = np.asarray(self.displacement, float)
         self.tip = np.asarray(self.tip, float)
         if not len(self.phase) == len(self.displacement) == len(self.tip):
-            raise ValueError(f"{self.tendon}: phase, displacement and tip differ in length")
+            raise InputError(f"{self.tendon}: phase, displacement and tip differ in length")
 
     @classmethod
     def from_rows(cls, tendon: str, rows: list[tuple[str, float, float]]) -> Curve:
@@ -91,7 +92,7 @@ class TipLog:
         lines = []
         for key, value in self.meta.items():
             if not re.fullmatch(r"[A-Za-z_][\w.-]*", key) or "\n" in value or "\r" in value:
-                raise ValueError(f"metadata {key!r}: {value!r} cannot be written as '# key: value'")
+                raise InputError(f"metadata {key!r}: {value!r} cannot be written as '# key: value'")
             lines.append(f"# {key}: {value}".rstrip())
         lines.append(",".join(HEADER))
         order = [t for t in TENDONS if t in self.curves]

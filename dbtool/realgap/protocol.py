@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from dbtool.design import Design, DesignFileError
+from dbtool.errors import InputError, MissingFileError
 from dbtool.realgap.log import TENDONS, Curve, TipLog
 from dbtool.runs import design_name
 from dbtool.sim.robot import Robot
@@ -45,10 +46,10 @@ class TendonParams:
     def __post_init__(self) -> None:
         for name, low in (("gain", 0.0), ("stiffness_scale", 0.0)):
             if not np.isfinite(getattr(self, name)) or getattr(self, name) <= low:
-                raise ValueError(f"{name} must be a positive number, got {getattr(self, name)}")
+                raise InputError(f"{name} must be a positive number, got {getattr(self, name)}")
         for name in ("friction_mm", "slack_mm"):
             if not np.isfinite(getattr(self, name)) or getattr(self, name) < 0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+                raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
 
     @classmethod
     def load(cls, path: str | Path) -> TendonParams:
@@ -56,15 +57,15 @@ class TendonParams:
         try:
             data = json.loads(Path(path).read_text())
         except FileNotFoundError:
-            raise ValueError(f"parameters file not found: {path}") from None
+            raise MissingFileError(f"parameters file not found: {path}") from None
         except (OSError, json.JSONDecodeError) as exc:
-            raise ValueError(f"cannot read parameters {path}: {exc}") from None
+            raise InputError(f"cannot read parameters {path}: {exc}") from None
         data = data.get("params", data) if isinstance(data, dict) else None
         if not isinstance(data, dict):
-            raise ValueError(f"{path}: expected a JSON object of tendon parameters")
+            raise InputError(f"{path}: expected a JSON object of tendon parameters")
         unknown = set(data) - set(asdict(cls()))
         if unknown:
-            raise ValueError(f"{path}: unknown parameter(s) {', '.join(sorted(unknown))}")
+            raise InputError(f"{path}: unknown parameter(s) {', '.join(sorted(unknown))}")
         return cls(**{k: float(v) for k, v in data.items()})
 
 
@@ -186,7 +187,7 @@ class Bench:
         self.material = Material(density=task.material.density / self.cfg.mass_scale)
         self.tips = np.flatnonzero(np.isin(idx, ep.info["tips"].get(1, [])) & ~clamp)
         if not len(self.tips) or clamp.all():
-            raise ValueError("the design's finger is too short for the tendon bench: its tip "
+            raise InputError("the design's finger is too short for the tendon bench: its tip "
                              "lies within one grid cell of its root")
         self.particles = Particles(
             x0=x0, phi=p.phi[idx], E=self.E0.copy(),
@@ -265,9 +266,9 @@ def standard_schedule(step_mm: float = 2.0, max_mm: float = 10.0,
                       tendons: tuple[str, ...] = TENDONS) -> dict[str, list[tuple[str, float]]]:
     """Pull 0, step, ..., max then release back to 0 (the paper's protocol), per tendon."""
     if not step_mm > 0:
-        raise ValueError(f"--step-mm must be > 0, got {step_mm}")
+        raise InputError(f"--step-mm must be > 0, got {step_mm}")
     if not max_mm >= step_mm:
-        raise ValueError(f"--max-mm must be at least the step ({step_mm} mm), got {max_mm}")
+        raise InputError(f"--max-mm must be at least the step ({step_mm} mm), got {max_mm}")
     n = int(np.floor(max_mm / step_mm + 1e-9))
     pull = [round(i * step_mm, 9) for i in range(n + 1)]
     seq = [("pull", d) for d in pull] + [("release", d) for d in pull[-2::-1]]

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from dbtool.atomic import atomic_write, atomic_write_text
+from dbtool.errors import InputError
 from dbtool.realgap.log import Curve, TipLog
 
 PHASES = ("pull", "release")
@@ -68,20 +69,20 @@ def curve_shape(curve: Curve) -> dict:
 def _check_pair(name: str, lc: Curve, sc: Curve) -> None:
     """One-line ValueError unless ``sc`` replays the schedule of ``lc``."""
     if len(sc.displacement) != len(lc.displacement):
-        raise ValueError(f"tendon {name}: {len(lc.displacement)} logged steps but "
+        raise InputError(f"tendon {name}: {len(lc.displacement)} logged steps but "
                          f"{len(sc.displacement)} simulated")
     gap = np.abs(np.asarray(sc.displacement, float) - np.asarray(lc.displacement, float))
     if gap.size and not np.all(gap <= DISPLACEMENT_TOL):
         i = int(np.argmax(np.where(np.isfinite(gap), gap, np.inf)))
-        raise ValueError(f"tendon {name} step {i}: displacement {float(lc.displacement[i])} mm "
+        raise InputError(f"tendon {name} step {i}: displacement {float(lc.displacement[i])} mm "
                          f"logged but {float(sc.displacement[i])} mm simulated")
     if list(sc.phase) != list(lc.phase):
         i = next(k for k, (a, b) in enumerate(zip(lc.phase, sc.phase, strict=True)) if a != b)
-        raise ValueError(f"tendon {name} step {i}: phase {lc.phase[i]!r} logged but "
+        raise InputError(f"tendon {name} step {i}: phase {lc.phase[i]!r} logged but "
                          f"{sc.phase[i]!r} simulated")
     for label, c in (("logged", lc), ("simulated", sc)):
         if not np.all(np.isfinite(np.asarray(c.tip, float))):
-            raise ValueError(f"tendon {name}: non-finite {label} tip distance")
+            raise InputError(f"tendon {name}: non-finite {label} tip distance")
 
 
 def compare(logged: TipLog, simulated: TipLog) -> dict:
@@ -95,7 +96,7 @@ def compare(logged: TipLog, simulated: TipLog) -> dict:
     worst: dict | None = None
     for name, lc in logged.curves.items():
         if name not in simulated.curves:
-            raise ValueError(f"tendon {name} is in the logged log but not in the simulated one")
+            raise InputError(f"tendon {name} is in the logged log but not in the simulated one")
         sc = simulated.curves[name]
         _check_pair(name, lc, sc)
         diff = np.asarray(sc.tip, float) - np.asarray(lc.tip, float)
@@ -209,7 +210,7 @@ def plot(logged: TipLog, simulated: TipLog | None, path: Path, title: str = "") 
 
     names = list(logged.curves)
     if not names:
-        raise ValueError("the logged log has no curves to plot")
+        raise InputError("the logged log has no curves to plot")
     source = logged.meta.get("source")
     llabel = f"logged ({source})" if source else "logged"
     fig, axs = plt.subplots(1, len(names), figsize=(5.2 * len(names), 4.2), squeeze=False)

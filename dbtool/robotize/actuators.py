@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from dbtool.errors import InputError
 from dbtool.sim.bodies import shape_occupancy
 from dbtool.sim.robot import DEFAULT_STIFFNESS, Robot
 from dbtool.sim.tasks import Task
@@ -20,7 +21,7 @@ def kmeans(points: np.ndarray, k: int, iters: int = 50) -> tuple[np.ndarray, np.
     Returns (labels, centroids).
     """
     if len(points) < k:
-        raise ValueError(f"cannot split {len(points)} particles into {k} actuator groups")
+        raise InputError(f"cannot split {len(points)} particles into {k} actuator groups")
     axis = int(np.argmax(np.ptp(points, axis=0)))
     order = np.argsort(points[:, axis], kind="stable")
     seeds = order[((np.arange(k) + 0.5) / k * len(points)).astype(int)]
@@ -100,7 +101,7 @@ def robot_from_occupancy(task: Task, occupancy: np.ndarray, stiffness: np.ndarra
     robot = Robot(pts, occ, np.asarray(stiff, float), np.zeros((len(pts), g)),
                   np.tile(task.direction, (g, 1)).reshape(g, 3))
     if not np.any(robot.active()):
-        raise ValueError("the body is empty: no particle reaches the occupancy threshold")
+        raise InputError("the body is empty: no particle reaches the occupancy threshold")
     if g:
         robot.actuators = task_actuators(task, pts, robot.active())
     return robot

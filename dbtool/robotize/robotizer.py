@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from dbtool.errors import InputError
 from dbtool.robotize import normals as N
 from dbtool.robotize.actuators import cluster_actuators
 from dbtool.robotize.direct_sdf import direct_occupancy
@@ -59,7 +60,7 @@ MIN_PARTICLES = 100  # minimum-volume guard on the kept component
 METHODS = ("dpsr", "direct_sdf")
 
 
-class RobotizeError(ValueError):
+class RobotizeError(InputError):
     """The cloud cannot become a robot (degenerate input or an empty/too small solid)."""
 
 
@@ -177,7 +178,7 @@ def robotize(x, task: Task, cfg: RobotizeConfig | None = None, noise: float | No
     """Psi: the robot of cloud ``x`` (prior frame) on ``task``'s design lattice.
 
     ``noise``: the std of the Gaussian noise in ``x`` (prior frame) when it is known, e.g.
-    ``dbtool.prior.diffusion.noise_std(t)`` for a diffusion sample x_t; ``None`` means a clean
+    ``dbtool.prior.sampling.diffusion.noise_std(t)`` for a diffusion sample x_t; ``None`` means a clean
     cloud. ``method``: ``dpsr`` (this module) or ``direct_sdf`` (the Figure 8 baseline,
     :mod:`dbtool.robotize.direct_sdf`).
     """

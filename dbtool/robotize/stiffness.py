@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from dbtool.errors import InputError
 from dbtool.sim.robot import DEFAULT_STIFFNESS
 
 MODES = ("constant", "depth")
@@ -33,7 +34,7 @@ def stiffness(mode: str, active: np.ndarray, dims: tuple[int, int, int], spacing
     if mode == "constant":
         return np.full(active.shape, DEFAULT_STIFFNESS)
     if mode != "depth":
-        raise ValueError(f"unknown stiffness mapping {mode!r}; choose one of {', '.join(MODES)}")
+        raise InputError(f"unknown stiffness mapping {mode!r}; choose one of {', '.join(MODES)}")
     grid = np.pad(active.reshape(dims), 1)  # the workspace's boundary counts as outside
     edt = ndimage.distance_transform_edt(grid)[1:-1, 1:-1, 1:-1].ravel()
     dist = np.maximum(edt - 1.0, 0.0) * spacing  # the outermost layer has depth 0

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from dbtool.errors import InputError
+
 SHAPES = ("box", "sphere", "ellipsoid", "cylinder", "star", "table", "finger")
 
 
@@ -66,7 +68,7 @@ def shape_occupancy(shape: str, points: np.ndarray, workspace) -> np.ndarray:
     elif shape == "finger":
         inside = (np.abs(x) <= 0.2) & (np.abs(z) <= 0.2)
     else:
-        raise ValueError(f"unknown shape {shape!r}; choose one of {', '.join(SHAPES)}")
+        raise InputError(f"unknown shape {shape!r}; choose one of {', '.join(SHAPES)}")
     return inside.astype(float)
 
 

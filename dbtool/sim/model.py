@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from dbtool.errors import InputError
 from dbtool.sim import kernels as K
 
 SUBSTEPS = 17  # MPM substeps per control step (every task; docs/method.md §3)
@@ -89,7 +90,7 @@ class Particles:
     def validate(self) -> None:
         n = self.n
         if n == 0:
-            raise ValueError("the body is empty: no particles to simulate")
+            raise InputError("the body is empty: no particles to simulate")
         shapes = {
             "x0": (n, 3), "phi": (n,), "E": (n,), "wact": (n, K.MAX_GROUPS),
             "adir": (n, 3), "glued": (n,), "v0": (n, 3), "damping": (n,), "field": (n,),
@@ -99,13 +100,13 @@ class Particles:
                 continue
             arr = np.asarray(getattr(self, name))
             if arr.shape != shape:
-                raise ValueError(f"particle field {name} has shape {arr.shape}, expected {shape}")
+                raise InputError(f"particle field {name} has shape {arr.shape}, expected {shape}")
             if not np.all(np.isfinite(arr)):
-                raise ValueError(f"particle field {name} contains NaN or inf")
+                raise InputError(f"particle field {name} contains NaN or inf")
         if self.damping is not None and np.any(np.asarray(self.damping) < 0):
-            raise ValueError("particle field damping must be >= 0")
+            raise InputError("particle field damping must be >= 0")
         if not np.any(self.phi > 0):
-            raise ValueError("the body is empty: every particle is inactive (occupancy 0)")
+            raise InputError("the body is empty: every particle is inactive (occupancy 0)")
 
     def subset(self, idx: np.ndarray) -> Particles:
         """The particles ``idx`` (indices or a boolean mask), every field sliced alike."""

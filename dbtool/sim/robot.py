@@ -7,6 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dbtool.errors import InputError
+
 OCCUPANCY_THRESHOLD = 0.5  # particles below it are inactive (no mass, no stress)
 DEFAULT_STIFFNESS = 3e4  # Young's modulus of robot material (SoftZoo range 1e4-1e5)
 
@@ -59,17 +61,17 @@ class Robot:
     def validate(self) -> None:
         n = self.n
         if n == 0:
-            raise ValueError("the body is empty: no particles")
+            raise InputError("the body is empty: no particles")
         if self.points.shape != (n, 3):
-            raise ValueError(f"points must have shape (N, 3), got {self.points.shape}")
+            raise InputError(f"points must have shape (N, 3), got {self.points.shape}")
         g = self.directions.shape[0]
         for name, shape in (("occupancy", (n,)), ("stiffness", (n,)), ("actuators", (n, g))):
             if getattr(self, name).shape != shape:
-                raise ValueError(f"{name} must have shape {shape}, got {getattr(self, name).shape}")
+                raise InputError(f"{name} must have shape {shape}, got {getattr(self, name).shape}")
         for name in ("points", "occupancy", "stiffness", "actuators", "directions"):
             if not np.all(np.isfinite(getattr(self, name))):
-                raise ValueError(f"robot field {name} contains NaN or inf")
+                raise InputError(f"robot field {name} contains NaN or inf")
         if not np.any(self.active()):
-            raise ValueError("the body is empty: no particle reaches the occupancy threshold")
+            raise InputError("the body is empty: no particle reaches the occupancy threshold")
         if np.any(self.stiffness[self.active()] <= 0):
-            raise ValueError("stiffness must be positive")
+            raise InputError("stiffness must be positive")

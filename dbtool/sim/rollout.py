@@ -13,9 +13,14 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from dbtool.errors import RunError
 from dbtool.sim.robot import Robot
 from dbtool.sim.simulator import Simulator
 from dbtool.sim.tasks import N_STEPS, SUBSTEPS, Episode, Task
+
+
+class MetricError(RunError, FloatingPointError):
+    """The episode ran but its metric is not finite (a design the task cannot score)."""
 
 
 @dataclass
@@ -35,7 +40,7 @@ def _metric(task: Task, ep: Episode, x0: np.ndarray, x: np.ndarray, grad: bool):
     phit = torch.tensor(ep.particles.phi, dtype=dtype, requires_grad=grad)
     value = task.metric(ep, torch.tensor(x0, dtype=dtype), xt, phit)
     if not torch.isfinite(value):
-        raise FloatingPointError(f"task {task.name}: the metric is not finite")
+        raise MetricError(f"task {task.name}: the metric is not finite")
     if not grad:
         return value.item(), None, None
     value.backward()

@@ -6,6 +6,8 @@ import os
 
 import taichi as ti
 
+from dbtool.errors import InputError
+
 _STATE: dict[str, object] = {}
 
 ARCHS = ("auto", "cpu", "cuda")
@@ -23,9 +25,9 @@ def init(arch: str = "cpu", precision: str = "f32", threads: int | None = None,
     Taichi's kernel profiler (``benchmarks/sim_profile.py``).
     """
     if arch not in ARCHS:
-        raise ValueError(f"unknown arch {arch!r}; choose one of {', '.join(ARCHS)}")
+        raise InputError(f"unknown arch {arch!r}; choose one of {', '.join(ARCHS)}")
     if precision not in PRECISIONS:
-        raise ValueError(f"unknown precision {precision!r}; choose one of {', '.join(PRECISIONS)}")
+        raise InputError(f"unknown precision {precision!r}; choose one of {', '.join(PRECISIONS)}")
     key = (arch, precision)
     if _STATE.get("key") == key and (threads is None or threads == _STATE.get("threads")) \
             and not profiler:

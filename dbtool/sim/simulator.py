@@ -19,6 +19,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from dbtool.errors import InputError
 from dbtool.sim import kernels as K
 from dbtool.sim import runtime, slots
 from dbtool.sim.backward import backward
@@ -54,7 +55,7 @@ class Simulator:
         self.n = particles.n  # every particle: the arrays the methods take and return
         glued = np.asarray(particles.glued) > 0
         if glued.all():
-            raise ValueError("every particle is glued: nothing in the scene can move")
+            raise InputError("every particle is glued: nothing in the scene can move")
         # ``moving``: the stepped particles' indices (None: all of them, see module docstring)
         self.moving = np.flatnonzero(~glued) if kinematic_glued and glued.any() else None
         self.q = particles if self.moving is None else particles.subset(self.moving)
@@ -66,7 +67,7 @@ class Simulator:
         hi = np.asarray(particles.x0).max(0)
         if np.any(lo < BOUND * scene.dx) or np.any(hi > np.array(scene.size)
                                                               - BOUND * scene.dx):
-            raise ValueError("particles start outside the simulation domain (or in its walls)")
+            raise InputError("particles start outside the simulation domain (or in its walls)")
         self.regions: list[Region] = []
         self.pool = pool = ArrayPool()
         g = requires_grad
@@ -160,11 +161,11 @@ class Simulator:
         actions = np.asarray(actions, dtype=float)
         if actions.ndim != 2 or actions.shape[0] != self.n_steps \
                 or actions.shape[1] > K.MAX_GROUPS:
-            raise ValueError(
+            raise InputError(
                 f"actions must have shape ({self.n_steps}, <= {K.MAX_GROUPS}), got {actions.shape}"
             )
         if not np.all(np.isfinite(actions)):
-            raise ValueError("actions contain NaN or inf")
+            raise InputError("actions contain NaN or inf")
         full = np.zeros((self.n_steps, K.MAX_GROUPS), self.np_dtype)
         full[:, : actions.shape[1]] = actions
         self.body.act.from_numpy(full)

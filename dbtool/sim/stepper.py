@@ -15,6 +15,7 @@ from typing import NamedTuple
 import numpy as np
 import taichi as ti
 
+from dbtool.errors import InputError, RunError
 from dbtool.sim import kernels as K
 from dbtool.sim.boundaries import MAX_BOXES
 from dbtool.sim.graphs import Call, Launcher
@@ -23,7 +24,7 @@ from dbtool.sim.slots import bounds, contact_box
 from dbtool.sim.state import ArrayPool, Body, Constants, Grid, State
 
 
-class SimulationError(RuntimeError):
+class SimulationError(RunError):
     """The simulation blew up (NaN, particles left the domain, or absurd velocities)."""
 
 
@@ -67,7 +68,7 @@ class Stepper:
         self.bound_chunks = 256 if atomic else chunks
         self.bbox = pool(dtype, (self.bound_chunks, 8))
         if len(scene.boxes) > MAX_BOXES:
-            raise ValueError(f"at most {MAX_BOXES} box colliders per scene")
+            raise InputError(f"at most {MAX_BOXES} box colliders per scene")
         boxes = np.zeros((MAX_BOXES, 6), self.np_dtype)
         for b, (c, h) in enumerate(scene.boxes):
             boxes[b] = (*c, *h)

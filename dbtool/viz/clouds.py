@@ -16,6 +16,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from dbtool.atomic import atomic_write  # noqa: E402
+from dbtool.errors import InputError
 
 
 def draw_cloud(ax, cloud: np.ndarray, title: str | None = None, lim: float = 0.55,
@@ -38,7 +39,7 @@ def cloud_grid(clouds: Sequence[np.ndarray], path: str | Path, titles: Sequence[
     """A grid PNG of clouds (row-major, ``cols`` per row) written atomically to ``path``."""
     n = len(clouds)
     if n == 0:
-        raise ValueError("no clouds to draw")
+        raise InputError("no clouds to draw")
     cols = cols or min(n, 8)
     rows = -(-n // cols)
     fig = plt.figure(figsize=(cell * cols, cell * rows + (0.4 if suptitle else 0)))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dbtool.errors import InputError
 from dbtool.sim.tasks.balancing import Balancing
 from dbtool.sim.tasks.base import N_STEPS, SUBSTEPS, Episode, Task
 from dbtool.sim.tasks.box import MovingBox
@@ -20,7 +21,7 @@ def get_task(name: str) -> Task:
     try:
         return TASKS[name]()
     except KeyError:
-        raise ValueError(f"unknown task {name!r}; choose one of {', '.join(TASKS)}") from None
+        raise InputError(f"unknown task {name!r}; choose one of {', '.join(TASKS)}") from None
 
 
 __all__ = ["TASKS", "Episode", "N_STEPS", "SUBSTEPS", "Task", "get_task"]

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from dbtool.errors import InputError
 from dbtool.sim.bodies import attached, lattice
 from dbtool.sim.boundaries import BOUND
 from dbtool.sim.kernels import MAX_GROUPS
@@ -21,7 +22,7 @@ GRAVITY = (0.0, -1.0, 0.0)
 N_STEPS = 100  # every task: 100 control steps of SUBSTEPS (the simulator's) substeps
 
 
-class DetachedError(ValueError):
+class DetachedError(InputError):
     """A body that should hang from a clamped base has no material attached to it."""
 
 
@@ -114,7 +115,7 @@ class Task:
         """Assemble simulator particles: robot (placed), then task objects."""
         robot.validate()
         if robot.actuators.shape[1] != self.n_groups:
-            raise ValueError(f"task {self.name} needs {self.n_groups} actuator groups, "
+            raise InputError(f"task {self.name} needs {self.n_groups} actuator groups, "
                              f"the robot has {robot.actuators.shape[1]}")
         xr, idx = self.place(robot)
         phi = (robot.presence() * self.attachment(robot))[idx]
