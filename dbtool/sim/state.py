@@ -3,6 +3,9 @@
 Taichi 1.7 kernels take ndarrays only as separate arguments (a ``ti.dataclass`` cannot hold
 one), so each group below is a small container whose iteration order is the kernels' argument
 order: a kernel call unpacks the groups it needs, e.g. ``p2g(*state, *body.stress, ...)``.
+``tests/test_kernel_binding.py`` names every argument of every kernel call by the container
+field (or scene value) it came from and checks it against the kernel's parameter names, so a
+reordered field fails the tests instead of changing the physics.
 
 * :class:`State`: the particle state slabs ``x, v, C, F``; slot ``k`` is substep ``k`` of the
   current control step, or control step ``k`` for the checkpoints.

@@ -61,8 +61,9 @@ class Stepper:
         self.n, self.dims = state.x.shape[1], scene.grid
         self.np_dtype = np.float64 if dtype == ti.f64 else np.float32
         p_vol = (scene.dx * 0.5) ** 3
-        self.consts = Constants(scene.dx, material.dt, p_vol, material.density, material.nu,
-                                material.act_strength)
+        self.consts = Constants(dx=scene.dx, dt=material.dt, p_vol=p_vol,
+                                p_rho=material.density, nu=material.nu,
+                                act_strength=material.act_strength)
         self.boxes = pool(dtype, (MAX_BOXES, 6))
         # bounds reduction: one row per CPU thread; on a GPU, rows of a few thousand particles
         self.bound_chunks = 256 if atomic else chunks
