@@ -167,3 +167,20 @@ def test_a_swapped_argument_is_caught():
     swapped = list(args)
     swapped[i], swapped[j] = swapped[j], swapped[i]
     assert len(_mismatches(sim, [(kernel, tuple(swapped))], region, {"s": 3})) == 2
+
+
+def test_an_arm64_cpu_runs_the_cpu_kernels(monkeypatch):
+    """Taichi's arm64 backend is a CPU: per-thread grid copies, not the GPU's atomics."""
+    import taichi as ti
+
+    from dbtool.sim import runtime
+
+    runtime.init()
+
+    class Config:
+        arch = ti.arm64
+
+    monkeypatch.setattr(ti.lang.impl, "current_cfg", lambda: Config)
+    assert runtime.arch() == "cpu"
+    Config.arch = ti.cuda
+    assert runtime.arch() == "gpu"

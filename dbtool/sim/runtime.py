@@ -11,6 +11,7 @@ from dbtool.errors import InputError
 _STATE: dict[str, object] = {}
 
 ARCHS = ("auto", "cpu", "cuda")
+CPU_ARCHS = (ti.x64, ti.arm64)  # Taichi's CPU backends: per-thread grid copies, no atomics
 PRECISIONS = ("f32", "f64")
 
 
@@ -74,7 +75,7 @@ def arch() -> str:
     """``cpu`` or ``gpu``: which kernel variants the simulator uses."""
     if "key" not in _STATE:
         init()
-    return "cpu" if ti.lang.impl.current_cfg().arch == ti.x64 else "gpu"
+    return "cpu" if ti.lang.impl.current_cfg().arch in CPU_ARCHS else "gpu"
 
 
 def threads() -> int:
