@@ -20,11 +20,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from dbtool.codesign.config import TABLE5
 from dbtool.sim.robot import DEFAULT_STIFFNESS, Robot
 from dbtool.sim.tasks import N_STEPS, Task
 
-CONTROLLER_LR = {"balancing": 0.0, "landing": 0.0, "crawling": 0.01, "hurdling": 0.001,
-                 "gripping": 0.001, "box": 0.001}  # Table 5, gamma
 LOG_STIFFNESS_RANGE = 1.0  # stiffness = E0 * exp(s), s in [-1, 1]: E0 / e .. E0 * e
 
 
@@ -124,7 +123,7 @@ def optimise(rep: Representation, iterations: int, n_steps: int = N_STEPS,
     task = rep.task
     actions = task.controller(n_steps) if actions is None else np.asarray(actions, float)
     u = torch.tensor(actions, dtype=torch.float64, requires_grad=True)
-    gamma = CONTROLLER_LR.get(task.name, 0.001) if controller_lr is None else controller_lr
+    gamma = TABLE5[task.name].gamma if controller_lr is None else controller_lr
     groups = [{"params": rep.parameters(), "lr": rep.design_lr}]
     if task.n_groups and gamma > 0:
         groups.append({"params": [u], "lr": gamma})

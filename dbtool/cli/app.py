@@ -12,11 +12,12 @@ from dbtool.cli.export import export_command
 from dbtool.cli.prior import prior_app
 from dbtool.cli.realgap import realgap_app
 from dbtool.codesign.config import PROMPT_T_MIN
+from dbtool.sim.task_names import NAMES
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="dbtool: breed soft robots with a diffusion prior and a differentiable "
                        "MPM simulator (DiffuseBot).")
-TASK_NAMES = "balancing, landing, crawling, hurdling, gripping, box"
+TASK_NAMES = ", ".join(NAMES)
 app.add_typer(prior_app, name="prior")
 app.add_typer(realgap_app, name="realgap")
 app.command("compare")(compare_command)

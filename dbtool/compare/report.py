@@ -25,7 +25,7 @@ from dbtool.atomic import atomic_write_text  # noqa: E402
 from dbtool.compare.methods import TITLES  # noqa: E402
 from dbtool.design import Design, DesignFileError  # noqa: E402
 from dbtool.errors import InputError, MissingFileError
-from dbtool.sim.tasks import TASKS as TASK_CLASSES  # noqa: E402
+from dbtool.sim.task_names import NAMES as TASKS  # noqa: E402
 from dbtool.sim.tasks import get_task  # noqa: E402
 from dbtool.viz.clouds import save_figure  # noqa: E402
 from dbtool.viz.robot import draw_robot  # noqa: E402
@@ -33,7 +33,6 @@ from dbtool.viz.robot import draw_robot  # noqa: E402
 COLUMNS = ("method", "task", "seed", "status", "metric", "budget_units", "budget_used",
            "forward_episodes", "gradient_episodes", "wall_s", "worker", "commit", "error")
 METHODS = TITLES  # display names, in table order
-TASKS = tuple(TASK_CLASSES)
 STATUSES = ("done", "failed")
 _FLOATS = ("metric", "budget_units", "budget_used", "wall_s")
 _INTS = ("seed", "forward_episodes", "gradient_episodes")

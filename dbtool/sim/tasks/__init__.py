@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dbtool.errors import InputError
+from dbtool.sim.task_names import NAMES
 from dbtool.sim.tasks.balancing import Balancing
 from dbtool.sim.tasks.base import N_STEPS, SUBSTEPS, Episode, Task
 from dbtool.sim.tasks.box import MovingBox
@@ -14,6 +15,8 @@ from dbtool.sim.tasks.landing import Landing
 TASKS: dict[str, type[Task]] = {
     t.name: t for t in (Balancing, Landing, Crawling, Hurdling, Gripping, MovingBox)
 }
+if tuple(TASKS) != NAMES:  # pragma: no cover - a task added here but not in task_names
+    raise ImportError(f"the task classes {tuple(TASKS)} differ from task_names {NAMES}")
 
 
 def get_task(name: str) -> Task:

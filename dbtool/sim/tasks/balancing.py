@@ -12,7 +12,6 @@ STICK = np.array([0.02, 0.05, 0.02])
 
 class Balancing(Task):
     name = "balancing"
-    title = "Balancing"
     setup = ("robot rests atop a stick platform 0.02x0.05x0.02 and is given an upward velocity "
              "of 0.5; it falls back onto the stick")
     metric_text = ("IoU of the space the robot occupies at the first and the last step "

@@ -13,12 +13,12 @@ from dbtool.sim.boundaries import BOUND
 from dbtool.sim.kernels import MAX_GROUPS
 from dbtool.sim.robot import Robot
 from dbtool.sim.simulator import SUBSTEPS, Material, Particles, Scene  # noqa: F401 (re-exported)
+from dbtool.sim.task_names import TITLES
 
 DX = 0.005  # grid spacing: the 0.08 workspace spans 16 cells
 SPACING = DX / 2  # particle spacing: 8 particles per cell
 GROUND = BOUND * DX  # the ground plane sits on top of the bottom wall
 OBJECT_STIFFNESS = 1e5  # the cube / box is a stiff elastic body
-GRAVITY = (0.0, -1.0, 0.0)
 N_STEPS = 100  # every task: 100 control steps of SUBSTEPS (the simulator's) substeps
 
 
@@ -43,7 +43,8 @@ class Episode:
 
 class Task:
     """One of the paper's six tasks. Subclasses set the class attributes and override the
-    hooks (``scene``, ``origin``, ``controller``, ``metric``)."""
+    hooks (``scene``, ``origin``, ``controller``, ``metric``); ``title`` comes with the name
+    from :data:`dbtool.sim.task_names.TITLES`."""
 
     name = ""
     title = ""
@@ -62,6 +63,11 @@ class Task:
     hangs = False
     object_stiffness = OBJECT_STIFFNESS  # Young's modulus of the task's cubes
     damping = 0.0  # material damping rate of the robot's particles (1/time; docs/method.md §3)
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        if cls.name:
+            cls.title = TITLES[cls.name]
 
     def mirror_plane(self) -> tuple[int, float] | None:
         """``(axis, value)``: the scene holds the design and its mirror copy about the world

@@ -16,7 +16,6 @@ CUBE = 0.03
 
 class MovingBox(Task):
     name = "box"
-    title = "Moving a box"
     setup = ("cube 0.03 resting on the robot's right end (its centre half a body length, 0.08, "
              "right of the robot's centre, on top of the workspace); robot workspace "
              "0.16x0.06x0.06")

@@ -13,7 +13,6 @@ TARGET = np.array([0.02, 0.05, 0.02])
 
 class Landing(Task):
     name = "landing"
-    title = "Landing"
     setup = ("robot starts 0.08 from a target block 0.02x0.05x0.02 (horizontally) and 0.045 "
              "above it, with initial velocity 0.5 along +x, towards the target")
     metric_text = "exp(-||p_robot - p_target||) at the last step (p = centroid / block centre)"
