@@ -53,9 +53,9 @@ def held(task, robot, steps: int = 300) -> float:
 
     ro = simulate(task, robot, np.zeros((steps, task.n_groups)), n_steps=steps)
     ep, P = ro.episode, ro.positions
-    phi = ep.particles.phi
+    presence = ep.particles.presence
     root = task.root(ep, 3.0 / MM)
-    w = phi[root] / phi[root].sum()
+    w = presence[root] / presence[root].sum()
     c = (P[:, root] * w[None, :, None]).sum(1)
     return float(np.linalg.norm(c - c[0], axis=1).max() * MM)
 
@@ -111,7 +111,7 @@ def nearest_mm(ro) -> np.ndarray:
     """Per step: the distance (mm) from the nearest active finger particle to the box of the
     cube's particle centres."""
     ep, P = ro.episode, ro.positions
-    fingers = (ep.info["finger"] > 0) & (ep.particles.phi > 0)
+    fingers = (ep.info["finger"] > 0) & (ep.particles.presence > 0)
     lo, hi = P[:, ep.object_mask].min(1), P[:, ep.object_mask].max(1)
     gap = np.maximum(np.maximum(lo[:, None] - P[:, fingers], P[:, fingers] - hi[:, None]), 0)
     return np.linalg.norm(gap, axis=2).min(1) * MM
@@ -150,7 +150,7 @@ def side_view(ro, path: Path, steps=(0, 25, 50, 75, 100)) -> None:
     import matplotlib.pyplot as plt
 
     ep, P = ro.episode, ro.positions
-    on = ep.particles.phi > 0
+    on = ep.particles.presence > 0
     finger, cube = ep.info["finger"], ep.object_mask
     parts = [(on & ep.robot_mask & (finger == 0), "#f5a623", "base"),
              (on & (finger == 1), "#d62728", "finger"), (on & (finger == 2), "#1f77b4", "mirror"),

@@ -100,14 +100,15 @@ def make_block(side: int) -> tuple[Any, Any]:
     grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
     x0 = grid + np.array([0.1, scene.ground_y, 0.03])
     n = len(x0)
-    wact = np.zeros((n, 4))
+    actuators = np.zeros((n, 4))
     front = grid[:, 0] >= length / 2
-    wact[front, 1] = 1.0
-    wact[~front, 0] = 1.0
-    particles = Particles(
-        x0=x0, phi=np.ones(n), E=np.full(n, E_MODULUS), wact=wact,
-        adir=np.tile((0.0, 1.0, 0.0), (n, 1)), glued=np.zeros(n), v0=np.zeros((n, 3)),
-    )
+    actuators[front, 1] = 1.0
+    actuators[~front, 0] = 1.0
+    body = {"presence": np.ones(n), "stiffness": np.full(n, E_MODULUS), "actuators": actuators,
+            "direction": np.tile((0.0, 1.0, 0.0), (n, 1))}
+    if "phi" in Particles.__dataclass_fields__:  # an older checkout (--compare): old names
+        body = dict(zip(("phi", "E", "wact", "adir"), body.values(), strict=True))
+    particles = Particles(x0=x0, glued=np.zeros(n), v0=np.zeros((n, 3)), **body)
     return scene, particles
 
 
@@ -466,7 +467,7 @@ def main(argv: list[str] | None = None) -> int:
             "warmup_episodes": 1, "quick": args.quick, "compare": args.compare,
             "compile_repeats": args.compile_repeats,
             "spacing": SPACING, "dx": 0.005,
-            "E": E_MODULUS, "actions": f"{AMPLITUDE}*sin, 2 groups, period {PERIOD} steps",
+            "stiffness": E_MODULUS, "actions": f"{AMPLITUDE}*sin, 2 groups, period {PERIOD} steps",
         },
         "units": {"*_pss": "particle-substeps per second", "*_s": "seconds",
                   "*_mb": "MiB (VmHWM / VmRSS)"},

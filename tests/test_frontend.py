@@ -88,8 +88,8 @@ scene = Scene(size=(0.1, 0.08, 0.08))
 axis = (np.arange(3) + 0.5) * 0.005
 x0 = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3) + 0.03
 n = len(x0)
-p = Particles(x0=x0, phi=np.ones(n), E=np.full(n, 3e4), wact=np.zeros((n, 4)),
-              adir=np.tile((0.0, 1.0, 0.0), (n, 1)), glued=np.zeros(n), v0=np.zeros((n, 3)))
+p = Particles(x0=x0, presence=np.ones(n), stiffness=np.full(n, 3e4), actuators=np.zeros((n, 4)),
+              direction=np.tile((0.0, 1.0, 0.0), (n, 1)), glued=np.zeros(n), v0=np.zeros((n, 3)))
 sim = Simulator(scene, p, n_steps=2, substeps=2)
 x = sim.forward(np.zeros((2, 2)))
 print(json.dumps({"fast": frontend._INSTALLED["done"], "x": np.asarray(x).tolist()}))

@@ -22,7 +22,7 @@ ROOT_MM = 3.0  # the root: a finger's particles within 3 mm of its top, next to 
 @functools.cache
 def _prior_bodies() -> dict:
     """Two robotized prior samples (seeded), as co-design would score them."""
-    from dbtool.prior.pipeline import Prior
+    from dbtool.prior.sampling.pipeline import Prior
 
     task = get_task("gripping")
     prior = Prior.load()
@@ -52,13 +52,13 @@ def _at_rest(robot) -> tuple[np.ndarray, np.ndarray]:
     task = get_task("gripping")
     ro = simulate(task, robot, np.zeros((HOLD_STEPS, task.n_groups)), n_steps=HOLD_STEPS)
     ep, P = ro.episode, ro.positions
-    phi = ep.particles.phi
+    presence = ep.particles.presence
     root = task.root(ep, ROOT_MM / MM)
-    w = phi[root] / phi[root].sum()
+    w = presence[root] / presence[root].sum()
     c = (P[:, root] * w[None, :, None]).sum(1)
     moved = np.linalg.norm(c - c[0], axis=1) * MM
-    finger = (ep.info["finger"] == 1) & (phi > 0)
-    ke = ((np.diff(P[:, finger], axis=0) ** 2).sum(2) * phi[finger]).sum(1)
+    finger = (ep.info["finger"] == 1) & (presence > 0)
+    ke = ((np.diff(P[:, finger], axis=0) ** 2).sum(2) * presence[finger]).sum(1)
     return moved, ke
 
 
@@ -189,7 +189,7 @@ def test_a_block_finger_lifts_the_cube():
     ep, P = ro.episode, ro.positions
     cube = P[:, ep.object_mask, 1].mean(1)
     lift = (cube - cube[0]) * MM
-    fingers = (ep.info["finger"] > 0) & (ep.particles.phi > 0)
+    fingers = (ep.info["finger"] > 0) & (ep.particles.presence > 0)
     lo, hi = P[:, ep.object_mask].min(1), P[:, ep.object_mask].max(1)
     gap = np.maximum(np.maximum(lo[:, None] - P[:, fingers], P[:, fingers] - hi[:, None]), 0)
     touching = np.linalg.norm(gap, axis=2).min(1) < DX
@@ -210,7 +210,7 @@ def test_a_cube_no_finger_touches_is_in_free_flight():
     ro = _block_rollout()
     ep, P = ro.episode, ro.positions
     cube = ep.object_mask
-    fingers = (ep.info["finger"] > 0) & (ep.particles.phi > 0)
+    fingers = (ep.info["finger"] > 0) & (ep.particles.presence > 0)
     lo, hi = P[:, cube].min(1), P[:, cube].max(1)
     gap = np.maximum(np.maximum(lo[:, None] - P[:, fingers], P[:, fingers] - hi[:, None]), 0)
     free = (np.linalg.norm(gap, axis=2).min(1) > DX) & (lo[:, 1] > lo[0, 1] + 0.001)
@@ -259,7 +259,7 @@ def test_material_that_does_not_reach_the_base_is_dropped():
     assert keep.any() and not keep[cut.points[:, 1] < 0.03].any()
     ep = task.episode(cut)
     lower = (ep.info["finger"] > 0) & (ep.particles.x0[:, 1] < task.origin()[1] + 0.03)
-    assert lower.any() and np.all(ep.particles.phi[lower] == 0)
+    assert lower.any() and np.all(ep.particles.presence[lower] == 0)
     # a body that never reaches the base: one clear error, not a silent zero
     with pytest.raises(DetachedError, match="does not reach its clamped base"):
         task.episode(_cut(robot, top - 2 * SPACING, top))

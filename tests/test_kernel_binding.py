@@ -29,9 +29,9 @@ ALIASES = {"out": "cbox", "ngrid": "adj.ngrid", "boxes": "boxes", "cbox": "cbox"
 def _block(origin, side):
     x0 = lattice((side,) * 3, 0.0025) + np.asarray(origin)
     n = len(x0)
-    return Particles(x0=x0, phi=np.ones(n), E=np.full(n, 3e4), wact=np.zeros((n, 4)),
-                     adir=np.tile([0.0, 1.0, 0.0], (n, 1)), glued=np.zeros(n),
-                     v0=np.zeros((n, 3)))
+    return Particles(x0=x0, presence=np.ones(n), stiffness=np.full(n, 3e4),
+                     actuators=np.zeros((n, 4)), direction=np.tile([0.0, 1.0, 0.0], (n, 1)),
+                     glued=np.zeros(n), v0=np.zeros((n, 3)))
 
 
 def _simulator(multi: bool) -> Simulator:
@@ -41,7 +41,8 @@ def _simulator(multi: bool) -> Simulator:
     if multi:
         cube = _block((0.03, 0.02, 0.09), 0.01)
         parts = Particles(*(np.concatenate([getattr(robot, f), getattr(cube, f)])
-                            for f in ("x0", "phi", "E", "wact", "adir", "glued", "v0")),
+                            for f in ("x0", "presence", "stiffness", "actuators", "direction",
+                                      "glued", "v0")),
                           field=np.r_[np.zeros(robot.n), np.ones(cube.n)])
     else:
         parts = robot
@@ -143,7 +144,7 @@ def test_every_kernel_argument_reaches_the_parameter_of_its_name(multi, atomic):
         # the adjoint of substep s reads and writes substep s's own slots
         assert _mismatches(sim, adjoint, region, {"s": s}) == []
     b = sim.body  # a control step's muscle signal (Stepper.segment)
-    assert _mismatches(sim, [(K.actuation, (b.wact, b.act, b.actp, 1, sim.stepper.n))],
+    assert _mismatches(sim, [(K.actuation, (b.actuators, b.act, b.actp, 1, sim.stepper.n))],
                        sim.regions[0], {"t": 1}) == []
 
 

@@ -78,9 +78,11 @@ def _check_every_field(label, sim, loss, grads, rng, acts):
         assert abs(lp - lm) > 1e-10, f"{name}: the loss does not depend on it (fd {fd})"
         assert rel < TOL, f"{name}: fd {fd} vs analytic {an} (rel {rel:.2e})"
 
-    check("phi", lambda: sim.p.phi, lambda a: sim.set_particle_fields(phi=a), 1e-5)
-    check("E", lambda: sim.p.E, lambda a: sim.set_particle_fields(E=a), 1e-1)
-    check("wact", lambda: sim.p.wact, lambda a: sim.set_particle_fields(wact=a), 1e-5)
+    check("presence", lambda: sim.p.presence, lambda a: sim.set_particle_fields(presence=a), 1e-5)
+    check("stiffness", lambda: sim.p.stiffness, lambda a: sim.set_particle_fields(stiffness=a),
+          1e-1)
+    check("actuators", lambda: sim.p.actuators, lambda a: sim.set_particle_fields(actuators=a),
+          1e-5)
     check("actions", lambda: acts[0], lambda a: acts.__setitem__(0, a), 1e-5)
     check("x0", lambda: sim.p.x0, lambda a: setattr(sim.p, "x0", a), 1e-7)
     check("v0", lambda: sim.p.v0, lambda a: setattr(sim.p, "v0", a), 1e-5)
@@ -96,14 +98,15 @@ def test_gradients_through_colliders_friction_and_initial_state():
     g = (np.stack(np.meshgrid(*[np.arange(side)] * 3, indexing="ij"), -1).reshape(-1, 3) + 0.5)
     x0 = g * sp + np.array([0.05, 0.0151, 0.05])
     n = len(x0)
-    wact = np.zeros((n, 4))
-    wact[:, 0] = g[:, 0] < side / 2
-    wact[:, 1] = 1 - wact[:, 0]
-    phi, E = rng.uniform(0.6, 1, n), rng.uniform(2e4, 4e4, n)
+    actuators = np.zeros((n, 4))
+    actuators[:, 0] = g[:, 0] < side / 2
+    actuators[:, 1] = 1 - actuators[:, 0]
+    presence, stiffness = rng.uniform(0.6, 1, n), rng.uniform(2e4, 4e4, n)
 
     def particles() -> Particles:
-        return Particles(x0=x0.copy(), phi=phi.copy(), E=E.copy(), wact=wact.copy(),
-                         adir=np.tile([0, 1.0, 0], (n, 1)), glued=np.zeros(n),
+        return Particles(x0=x0.copy(), presence=presence.copy(), stiffness=stiffness.copy(),
+                         actuators=actuators.copy(),
+                         direction=np.tile([0, 1.0, 0], (n, 1)), glued=np.zeros(n),
                          v0=np.tile([0.3, -0.2, 0.1], (n, 1)))
 
     box = ((0.084, 0.03, 0.07), (0.01, 0.015, 0.03))  # 4 mm right of the body
@@ -144,37 +147,37 @@ def test_absent_particles_get_their_presence_gradient_and_nothing_else():
     # scattered through the block's inside, as in a design, so that every node they touch also
     # holds material (with the 1e-200 below, a node that only they touch would get a velocity)
     absent = (rng.uniform(size=n) < 0.3) & np.all((g > 2) & (g < side - 2), axis=1)
-    wact = np.zeros((n, 4))
-    wact[:, 0] = g[:, 0] < side / 2
-    wact[:, 1] = 1 - wact[:, 0]
-    E = rng.uniform(2e4, 4e4, n)
+    actuators = np.zeros((n, 4))
+    actuators[:, 0] = g[:, 0] < side / 2
+    actuators[:, 1] = 1 - actuators[:, 0]
+    stiffness = rng.uniform(2e4, 4e4, n)
     acts = 0.3 * np.sin(np.arange(STEPS)[:, None] * 0.7 + np.arange(2)[None])
     w = np.where(absent[:, None], 0.0, rng.normal(size=(n, 3)))  # no metric reads them
 
-    def run(phi: np.ndarray):
+    def run(presence: np.ndarray):
         sim = Simulator(Scene(size=(0.15, 0.1, 0.1)), Particles(
-            x0=x0.copy(), phi=phi, E=E.copy(), wact=wact.copy(),
-            adir=np.tile([0, 1.0, 0], (n, 1)), glued=np.zeros(n),
+            x0=x0.copy(), presence=presence, stiffness=stiffness.copy(), actuators=actuators.copy(),
+            direction=np.tile([0, 1.0, 0], (n, 1)), glued=np.zeros(n),
             v0=np.tile([0.3, -0.2, 0.1], (n, 1))), n_steps=STEPS)
         sim.forward(acts)
         return float((sim.final_state()["x"] * w).sum()), sim
 
-    phi = np.where(absent, 0.0, rng.uniform(0.6, 1, n))
-    base, sim = run(phi)
+    presence = np.where(absent, 0.0, rng.uniform(0.6, 1, n))
+    base, sim = run(presence)
     grads = sim.backward(w)
     d = np.where(absent, rng.uniform(size=n), 0.0)
     eps = 1e-5
-    fd = (4 * run(phi + eps * d)[0] - run(phi + 2 * eps * d)[0] - 3 * base) / (2 * eps)
-    an = float((grads["phi"] * d).sum())
+    fd = (4 * run(presence + eps * d)[0] - run(presence + 2 * eps * d)[0] - 3 * base) / (2 * eps)
+    an = float((grads["presence"] * d).sum())
     print(f"absent d/dphi: fd={fd:.9e} analytic={an:.9e}")
     assert abs(fd) > 1e-4 and abs(fd - an) < TOL * abs(fd)
-    full = run(np.where(absent, 1e-200, phi))[1].backward(w)
-    for key in ("phi", "E", "wact", "actions", "x0", "v0"):
+    full = run(np.where(absent, 1e-200, presence))[1].backward(w)
+    for key in ("presence", "stiffness", "actuators", "actions", "x0", "v0"):
         scale = np.abs(full[key]).max()  # the 1e-200 presence adds terms of order 1e-200
         assert scale > 0, key
         np.testing.assert_allclose(grads[key], full[key], rtol=1e-12, atol=1e-14 * scale,
                                    err_msg=key)
-    assert np.all(grads["E"][absent] == 0) and np.all(grads["x0"][absent] == 0)
+    assert np.all(grads["stiffness"][absent] == 0) and np.all(grads["x0"][absent] == 0)
 
 
 def test_gradient_episodes_are_bit_reproducible():
@@ -199,13 +202,14 @@ def test_gradients_with_damping_and_a_loss_read_along_the_episode():
     x0 = g * sp + np.array([0.05, 0.05, 0.05])
     n = len(x0)
     glued = (g[:, 1] > side - 1).astype(float)  # the top layer is clamped
-    wact = np.zeros((n, 4))
-    wact[:, 0] = (g[:, 0] < side / 2) * (1 - glued)
-    E = rng.uniform(2e4, 4e4, n)
+    actuators = np.zeros((n, 4))
+    actuators[:, 0] = (g[:, 0] < side / 2) * (1 - glued)
+    stiffness = rng.uniform(2e4, 4e4, n)
 
-    def particles(e=E) -> Particles:
-        return Particles(x0=x0.copy(), phi=np.ones(n), E=e.copy(),
-                         wact=wact.copy(), adir=np.tile([0, 1.0, 0], (n, 1)), glued=glued,
+    def particles(e=stiffness) -> Particles:
+        return Particles(x0=x0.copy(), presence=np.ones(n), stiffness=e.copy(),
+                         actuators=actuators.copy(), direction=np.tile([0, 1.0, 0], (n, 1)),
+                         glued=glued,
                          v0=np.zeros((n, 3)))
 
     scene = Scene(size=(0.15, 0.15, 0.15), friction=0.0, damping=200.0)
@@ -224,12 +228,12 @@ def test_gradients_with_damping_and_a_loss_read_along_the_episode():
     undamped = loss(Simulator(Scene(size=scene.size, friction=0.0), particles(), n_steps=STEPS))
     print(f"without damping the loss changes by {abs(undamped - base):.3e}")
     assert abs(undamped - base) > 1e-6
-    for name, eps in (("E", 1e-1), ("actions", 1e-5)):
-        d = rng.normal(size=E.shape if name == "E" else acts.shape)
-        if name == "E":
-            lp = loss(Simulator(scene, particles(E + eps * d), n_steps=STEPS))
-            lm = loss(Simulator(scene, particles(E - eps * d), n_steps=STEPS))
-            an = float((grads["E"] * d).sum())
+    for name, eps in (("stiffness", 1e-1), ("actions", 1e-5)):
+        d = rng.normal(size=stiffness.shape if name == "stiffness" else acts.shape)
+        if name == "stiffness":
+            lp = loss(Simulator(scene, particles(stiffness + eps * d), n_steps=STEPS))
+            lm = loss(Simulator(scene, particles(stiffness - eps * d), n_steps=STEPS))
+            an = float((grads["stiffness"] * d).sum())
         else:
             a0 = acts.copy()
             acts = a0 + eps * d
@@ -259,8 +263,10 @@ def test_gradients_through_a_clamped_gripping_episode():
     w = rng.normal(size=(n, 3)) * (p.glued == 0)[:, None]
     acts = task.controller(STEPS) + 0.2 * rng.standard_normal((STEPS, task.n_groups))
 
-    def loss(phi=p.phi, E=p.E, a=acts, clamp=True, damping=p.damping) -> float:
-        parts = Particles(x0=p.x0, phi=phi, E=E, wact=p.wact, adir=p.adir, glued=p.glued,
+    def loss(presence=p.presence, stiffness=p.stiffness, a=acts, clamp=True,
+             damping=p.damping) -> float:
+        parts = Particles(x0=p.x0, presence=presence, stiffness=stiffness, actuators=p.actuators,
+                          direction=p.direction, glued=p.glued,
                           v0=p.v0, damping=damping, field=p.field)
         s = Simulator(ep.scene, parts, task.material, n_steps=STEPS)
         if not clamp:
@@ -279,13 +285,13 @@ def test_gradients_through_a_clamped_gripping_episode():
         print(f"without the {label} the loss changes by {change:.3e}")
         assert change > 1e-6, f"the {label} does not shape the episode"
     finger = (p.glued == 0) & ep.robot_mask
-    for name, eps in (("phi", 1e-5), ("E", 1e-1), ("actions", 1e-5)):
+    for name, eps in (("presence", 1e-5), ("stiffness", 1e-1), ("actions", 1e-5)):
         if name == "actions":
             d = rng.uniform(-1, 1, acts.shape)
             lp, lm = loss(a=acts + eps * d), loss(a=acts - eps * d)
             an = float((grads["actions"][:, : task.n_groups] * d).sum())
         else:
-            d = rng.uniform(-1, 1, n) * finger * (1e3 if name == "E" else 1.0)
+            d = rng.uniform(-1, 1, n) * finger * (1e3 if name == "stiffness" else 1.0)
             v = getattr(p, name)
             lp, lm = loss(**{name: v + eps * d}), loss(**{name: v - eps * d})
             an = float((grads[name] * d).sum())
@@ -324,7 +330,7 @@ def test_glued_particles_are_kinematic_without_being_stepped():
     assert np.abs(x_kin - x_all).max() < 1e-9 * moved
     for k in ("x", "v"):
         assert np.allclose(end_kin[k], end_all[k], rtol=1e-9, atol=1e-12)
-    for k in ("phi", "E", "wact", "actions", "x0", "v0"):
+    for k in ("presence", "stiffness", "actuators", "actions", "x0", "v0"):
         a, b = g_all[k], g_kin[k]
         scale = np.abs(a).max()
         assert scale > 0 or k == "v0", k
@@ -345,14 +351,15 @@ def _two_fields(mu=0.5, rng=None):
     n, m = len(x0), len(a)
     field = np.r_[np.zeros(m), np.ones(m)]
     v0 = np.concatenate([np.tile([0.35, 0.0, 0.15], (m, 1)), np.tile([-0.3, 0.1, -0.1], (m, 1))])
-    wact = np.zeros((n, 4))
-    wact[:m, 0] = g[:, 0] < side / 2
-    wact[:m, 1] = 1 - wact[:m, 0]
-    phi, E = rng.uniform(0.6, 1, n), rng.uniform(2e4, 4e4, n)
+    actuators = np.zeros((n, 4))
+    actuators[:m, 0] = g[:, 0] < side / 2
+    actuators[:m, 1] = 1 - actuators[:m, 0]
+    presence, stiffness = rng.uniform(0.6, 1, n), rng.uniform(2e4, 4e4, n)
 
     def particles(field=field) -> Particles:
-        return Particles(x0=x0.copy(), phi=phi.copy(), E=E.copy(), wact=wact.copy(),
-                         adir=np.tile([0, 1.0, 0], (n, 1)), glued=np.zeros(n), v0=v0.copy(),
+        return Particles(x0=x0.copy(), presence=presence.copy(), stiffness=stiffness.copy(),
+                         actuators=actuators.copy(),
+                         direction=np.tile([0, 1.0, 0], (n, 1)), glued=np.zeros(n), v0=v0.copy(),
                          field=field)
 
     def scene(mu=mu) -> Scene:
@@ -407,5 +414,5 @@ def test_the_gpu_kernels_agree_with_the_cpu_ones():
         sim.release()
     (xa, ga), (xb, gb) = out
     np.testing.assert_allclose(xb, xa, rtol=0, atol=1e-12)
-    for k in ("phi", "E", "actions", "x0", "v0"):
+    for k in ("presence", "stiffness", "actions", "x0", "v0"):
         np.testing.assert_allclose(gb[k], ga[k], rtol=1e-8, atol=1e-10 * np.abs(ga[k]).max())

@@ -13,8 +13,8 @@ from dbtool.sim.tasks import get_task
 def _block(origin, side=0.03, v0=(0.0, 0.0, 0.0), glued=None):
     x0 = lattice((side, side, side), 0.0025) + np.asarray(origin)
     n = len(x0)
-    return Particles(x0=x0, phi=np.ones(n), E=np.full(n, 3e4), wact=np.zeros((n, 4)),
-                     adir=np.tile([0.0, 1.0, 0.0], (n, 1)),
+    return Particles(x0=x0, presence=np.ones(n), stiffness=np.full(n, 3e4),
+                     actuators=np.zeros((n, 4)), direction=np.tile([0.0, 1.0, 0.0], (n, 1)),
                      glued=np.zeros(n) if glued is None else glued, v0=np.tile(v0, (n, 1)))
 
 
@@ -25,7 +25,7 @@ def test_mass_is_conserved_on_the_grid():
         sim.forward(np.zeros((5, 4)))
         if grad:  # the backward's re-simulation leaves every substep of control step 0
             sim.backward(np.zeros((p.n, 3)))
-        expected = sim.stepper.consts.m_unit * p.phi.sum()
+        expected = sim.stepper.consts.m_unit * p.presence.sum()
         grid_mass = sim.grid.m.to_numpy()  # a forward pass keeps one grid: the last substep's
         totals = grid_mass.reshape(sim.substeps if grad else 1, -1).sum(1)
         np.testing.assert_allclose(totals, expected, rtol=1e-4)
@@ -70,7 +70,7 @@ def test_glued_particles_do_not_move():
 
 def test_blow_up_is_reported_not_segfaulted():
     p = _block((0.04, 0.04, 0.04), v0=(0.0, 0.0, 0.0))
-    p.E[:] = 1e9  # far beyond the CFL limit of dt = 1e-4
+    p.stiffness[:] = 1e9  # far beyond the CFL limit of dt = 1e-4
     sim = Simulator(Scene(size=(0.12, 0.12, 0.12)), p, n_steps=30, requires_grad=False)
     p.v0[:, 0] = np.linspace(-1, 1, p.n)
     with pytest.raises(SimulationError):
@@ -89,7 +89,7 @@ def test_an_object_with_its_own_field_rests_on_the_ground_or_falls_onto_it(heigh
     cube = _block((0.03, ground + height_mm / 1000, 0.03))
     n, m = robot.n, cube.n
     parts = Particles(*(np.concatenate([getattr(robot, f), getattr(cube, f)]) for f in
-                        ("x0", "phi", "E", "wact", "adir", "glued", "v0")),
+                        ("x0", "presence", "stiffness", "actuators", "direction", "glued", "v0")),
                       field=np.r_[np.zeros(n), np.ones(m)])
     steps = 20
     sim = Simulator(Scene(size=(0.12, 0.1, 0.12), ground_y=ground, object_friction=0.5),

@@ -42,7 +42,7 @@ def _reference_run(name: str, shape: str) -> tuple[float, np.ndarray]:
     ro = simulate(task, reference_robot(task, shape).compact())
     assert ro.positions.shape[0] == 101
     ep = ro.episode
-    w = ep.particles.phi[ep.robot_mask]
+    w = ep.particles.presence[ep.robot_mask]
     centroid = (ro.positions[:, ep.robot_mask] * w[None, :, None]).sum(1) / w.sum()
     return float(ro.metric), centroid
 

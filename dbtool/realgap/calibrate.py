@@ -85,7 +85,7 @@ def loss_and_grad(bench: Bench, log: TipLog, params: TendonParams, names: tuple[
     out = np.zeros(len(names))
     for j, name in enumerate(names):
         if name == "stiffness_scale":
-            out[j] = float((grads["E"].astype(float) * bench.E0).sum())
+            out[j] = float((grads["stiffness"].astype(float) * bench.E0).sum())
             continue
         value = getattr(params, name)
         h = 1e-6 * max(1.0, abs(value))

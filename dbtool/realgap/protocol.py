@@ -173,7 +173,7 @@ class Bench:
         task = get_task(design.task)
         robot: Robot = design.robot
         ep = task.episode(robot)
-        finger = (ep.info["finger"] == 1) & (ep.particles.phi > 0)
+        finger = (ep.info["finger"] == 1) & (ep.particles.presence > 0)
         p = ep.particles
         idx = np.flatnonzero(finger)
         x0 = p.x0[idx]
@@ -183,15 +183,15 @@ class Bench:
         clamp = x0[:, 1] >= top - DX - 1e-9
         self.clamp = clamp
         _, self.plane = task.mirror_plane()
-        self.E0 = p.E[idx].astype(float)
+        self.E0 = p.stiffness[idx].astype(float)
         self.material = Material(density=task.material.density / self.cfg.mass_scale)
         self.tips = np.flatnonzero(np.isin(idx, ep.info["tips"].get(1, [])) & ~clamp)
         if not len(self.tips) or clamp.all():
             raise InputError("the design's finger is too short for the tendon bench: its tip "
                              "lies within one grid cell of its root")
         self.particles = Particles(
-            x0=x0, phi=p.phi[idx], E=self.E0.copy(),
-            wact=np.where(clamp[:, None], 0.0, p.wact[idx]), adir=p.adir[idx],
+            x0=x0, presence=p.presence[idx], stiffness=self.E0.copy(),
+            actuators=np.where(clamp[:, None], 0.0, p.actuators[idx]), direction=p.direction[idx],
             glued=clamp.astype(float), v0=np.zeros_like(x0))
         scene = task.scene()
         scene.gravity *= self.cfg.mass_scale
@@ -228,7 +228,7 @@ class Bench:
 
     def simulator(self, n_steps: int, params: TendonParams, grad: bool = False) -> Simulator:
         parts = self.particles
-        parts.E = self.E0 * params.stiffness_scale
+        parts.stiffness = self.E0 * params.stiffness_scale
         return Simulator(self.scene, parts, self.material, n_steps, requires_grad=grad)
 
     def tip_mm(self, positions: np.ndarray) -> np.ndarray:

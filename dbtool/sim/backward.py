@@ -57,10 +57,10 @@ def backward(sp: Stepper, checkpoints: State, adj: Adjoint, regions: Sequence[Re
     ``grad_x_steps[t]`` adds d loss / d the positions of checkpoint ``t`` (0 .. n_steps): a
     loss read along the episode (the tendon protocol of docs/realgap.md).
 
-    Returns d loss / d ``phi``, ``E``, ``wact``, ``actions``, ``x0`` and ``v0``.
+    Returns d loss / d ``presence``, ``stiffness``, ``actuators``, ``actions``, ``x0`` and ``v0``.
     """
     S, n, f, body = sp.substeps, sp.n, sp.np_dtype, sp.body
-    for a in (body.phi, body.E, body.wact, body.act):
+    for a in (body.presence, body.stiffness, body.actuators, body.act):
         a.grad.fill(0)
     steps = dict(grad_x_steps or {})
     # Only slot S is read before it is written: zero it, then seed x and v there.
@@ -69,7 +69,7 @@ def backward(sp: Stepper, checkpoints: State, adj: Adjoint, regions: Sequence[Re
         if seed is not None:
             adj.seed.from_numpy(np.broadcast_to(seed, (n, 3)).astype(f))
             slots.put_slot(adj.seed, arr, S, n)
-    wact = body.wact.to_numpy().astype(np.float64)
+    actuators = body.actuators.to_numpy().astype(np.float64)
     g_act = np.zeros(body.act.shape, np.float64)
     n_steps = len(regions)
     for t in reversed(range(n_steps)):
@@ -87,15 +87,15 @@ def backward(sp: Stepper, checkpoints: State, adj: Adjoint, regions: Sequence[Re
         # the autodiff kernel, which clears the adjoint of the overwritten a_p): its atomic
         # adds from all particles into one number per group differ in the last bits from
         # run to run (rel. 1e-5 on gripping), and the co-design sampler amplifies that.
-        # Its per-particle wact.grad has no such race.
-        g_act[t] = (wact * adj.actp.to_numpy().astype(np.float64)[:, None]).sum(0)
-        K.actuation.grad(body.wact, body.act, body.actp, t, n)
+        # Its per-particle actuators.grad has no such race.
+        g_act[t] = (actuators * adj.actp.to_numpy().astype(np.float64)[:, None]).sum(0)
+        K.actuation.grad(body.actuators, body.act, body.actp, t, n)
     if 0 in steps:
         _seed(adj, 0, steps[0])
     return {
-        "phi": adj.phi.to_numpy(),
-        "E": adj.E.to_numpy(),
-        "wact": body.wact.grad.to_numpy(),
+        "presence": adj.presence.to_numpy(),
+        "stiffness": adj.stiffness.to_numpy(),
+        "actuators": body.actuators.grad.to_numpy(),
         "actions": g_act.astype(f),
         "x0": _slot(adj, adj.x, 0),
         "v0": _slot(adj, adj.v, 0),

@@ -7,7 +7,7 @@ hand-written adjoints are in :mod:`dbtool.sim.kernels_adjoint`.
 A substep is ``stress -> p2g -> grid_op -> g2p``:
 
 * ``stress`` (inside ``p2g``): deformation-gradient update and the APIC affine matrix
-  ``A = -dt V0 (4/dx^2) phi tau + m C`` with the compressible neo-Hookean Kirchhoff stress
+  ``A = -dt V0 (4/dx^2) presence tau + m C`` with the compressible neo-Hookean Kirchhoff stress
   ``tau = mu (F F^T - I) + lam J (J - 1) I`` and the muscle term ``-a k F d d^T F^T`` along the
   particle's actuator direction ``d`` (positive ``a`` extends the material along ``d``),
   ``k = act_strength * E``.
@@ -28,13 +28,12 @@ A substep is ``stress -> p2g -> grid_op -> g2p``:
   robot's mass-weighted positions (the contact's separation test) are read only at nodes with
   object mass, so only the robot particles whose stencils can share a node with the object's
   in this substep (:func:`dbtool.sim.slots.contact_box`, ``cbox``) scatter them; the others
-  would only add to
-  nodes where they are never read.
+  would only add to nodes where they are never read.
 
 The arguments come in a fixed order, built by the containers of :mod:`dbtool.sim.state`:
-particle state ``(x, v, C, F)``, body fields ``(phi, E, actp, adir)``, grid arrays, the
-slots (the state is read from slot ``s`` and written to slot ``so``, grid arrays go to grid
-slot ``gs``: a substep's own slots where the backward pass reads them, two alternating state
+particle state ``(x, v, C, F)``, body fields ``(presence, stiffness, actp, direction)``, grid
+arrays, the slots (the state is read from slot ``s`` and written to slot ``so``, grid arrays go
+to grid slot ``gs``: a substep's own slots where the backward pass reads them, two alternating state
 slots and one grid slot in a forward pass, whose data then stays in the CPU's caches) and the
 particle count ``n``, the grid size ``nx, ny, nz``, the region
 ``lx, ly, lz, hx, hy, hz`` and the constants of :class:`~dbtool.sim.state.Constants`.
@@ -122,7 +121,7 @@ def _stress(Cp, Fn, ph, e, a, d, dx, dt, p_vol, p_rho, nu, act_strength):
 
 
 @ti.kernel
-def actuation(wact: nd(), act: nd(), actp: nd(), t: ti.i32, n: ti.i32):
+def actuation(actuators: nd(), act: nd(), actp: nd(), t: ti.i32, n: ti.i32):
     """Per-particle muscle signal of control step ``t``: ``a_p = sum_g w_pg u_tg``.
 
     It is constant over the step's substeps, so its Taichi-autodiff ``actuation.grad`` runs
@@ -130,7 +129,7 @@ def actuation(wact: nd(), act: nd(), actp: nd(), t: ti.i32, n: ti.i32):
     for p in range(n):
         a = 0.0
         for g in ti.static(range(MAX_GROUPS)):
-            a += wact[p, g] * act[t, g]
+            a += actuators[p, g] * act[t, g]
         actp[p] = a
 
 
@@ -154,8 +153,8 @@ def _dweights(w, dw, i: ti.template(), j: ti.template(), k: ti.template()):
 
 @ti.func
 def _p2g_particle(
-    x: ti.template(), v: ti.template(), C: ti.template(), F: ti.template(), phi: ti.template(),
-    E: ti.template(), actp: ti.template(), adir: ti.template(), damp: ti.template(),
+    x: ti.template(), v: ti.template(), C: ti.template(), F: ti.template(), presence: ti.template(),
+    stiffness: ti.template(), actp: ti.template(), direction: ti.template(), damp: ti.template(),
     field: ti.template(), scratch: ti.template(), oscratch: ti.template(),
     nscratch: ti.template(), xscratch: ti.template(), s, so, p, c, ny, nz, nxyz, lo, hi, blo,
     bhi, dx, dt, p_vol, p_rho, nu, act_strength, multi: ti.template(), atomic: ti.template(),
@@ -166,19 +165,19 @@ def _p2g_particle(
     obj = False
     if ti.static(multi):
         obj = field[p] > 0.0
-    ph = phi[p]
+    ph = presence[p]
     # A robot particle of presence 0 has no mass and no stress: it scatters only zeros. It
     # still moves with the grid and its F is kept, for its presence adjoint.
     if ph != 0.0 or obj:
-        Ap = _stress(Cp, Fn, ph, E[p], actp[p], adir[p], dx, dt, p_vol, p_rho, nu,
+        Ap = _stress(Cp, Fn, ph, stiffness[p], actp[p], direction[p], dx, dt, p_vol, p_rho, nu,
                      act_strength)
-        _p2g_scatter(x, v, phi, damp, scratch, oscratch, nscratch, xscratch, Ap, obj, s, p, c,
+        _p2g_scatter(x, v, presence, damp, scratch, oscratch, nscratch, xscratch, Ap, obj, s, p, c,
                      ny, nz, nxyz, lo, hi, blo, bhi, dx, p_rho, p_vol, multi, atomic)
 
 
 @ti.func
 def _p2g_scatter(
-    x: ti.template(), v: ti.template(), phi: ti.template(), damp: ti.template(),
+    x: ti.template(), v: ti.template(), presence: ti.template(), damp: ti.template(),
     scratch: ti.template(), oscratch: ti.template(), nscratch: ti.template(),
     xscratch: ti.template(), Ap, obj, s, p, c, ny, nz, nxyz, lo, hi, blo, bhi, dx, p_rho,
     p_vol, multi: ti.template(), atomic: ti.template(),
@@ -192,7 +191,7 @@ def _p2g_scatter(
     base = _base(xp, inv_dx, lo, hi)
     fx = xp * inv_dx - ti.cast(base, float)
     w, dw = _weights(fx)
-    m = m_unit * phi[p]
+    m = m_unit * presence[p]
     mv = (m * damp[p]) * v[s, p]
     b = _node(c, base[0], base[1], base[2], ny, nz, nxyz)
     near = True  # can this particle's stencil share a node with the object's?
@@ -239,7 +238,8 @@ def _p2g_kernels(multi: bool) -> tuple:
 
     @ti.kernel
     def p2g(
-        x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
+        x: nd(), v: nd(), C: nd(), F: nd(), presence: nd(), stiffness: nd(), actp: nd(),
+        direction: nd(),
         damp: nd(), field: nd(), scratch: nd(), oscratch: nd(), nscratch: nd(), xscratch: nd(),
         s: ti.i32, so: ti.i32, n: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
         lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, cbox: nd(),
@@ -260,13 +260,15 @@ def _p2g_kernels(multi: bool) -> tuple:
             c = q // SPREAD
             a, b = _range(c, chunks, n)
             for p in range(a, b):
-                _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, field, scratch, oscratch,
+                _p2g_particle(x, v, C, F, presence, stiffness, actp, direction, damp, field,
+                              scratch, oscratch,
                               nscratch, xscratch, s, so, p, c, ny, nz, nx * ny * nz, lo, hi,
                               blo, bhi, dx, dt, p_vol, p_rho, nu, act_strength, multi_, False)
 
     @ti.kernel
     def p2g_atomic(
-        x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(),
+        x: nd(), v: nd(), C: nd(), F: nd(), presence: nd(), stiffness: nd(), actp: nd(),
+        direction: nd(),
         damp: nd(), field: nd(), scratch: nd(), oscratch: nd(), nscratch: nd(), xscratch: nd(),
         s: ti.i32, so: ti.i32, n: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32, lx: ti.i32,
         ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, cbox: nd(), dx: float,
@@ -277,7 +279,8 @@ def _p2g_kernels(multi: bool) -> tuple:
         blo = ti.Vector([cbox[0], cbox[1], cbox[2]])
         bhi = ti.Vector([cbox[3], cbox[4], cbox[5]])
         for p in range(n):
-            _p2g_particle(x, v, C, F, phi, E, actp, adir, damp, field, scratch, oscratch,
+            _p2g_particle(x, v, C, F, presence, stiffness, actp, direction, damp, field, scratch,
+                          oscratch,
                           nscratch, xscratch, s, so, p, 0, ny, nz, nx * ny * nz, lo, hi, blo,
                           bhi, dx, dt, p_vol, p_rho, nu, act_strength, multi_, True)
 

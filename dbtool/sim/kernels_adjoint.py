@@ -38,7 +38,8 @@ def _cofactor(M):
 @ti.func
 def _stress_vjp(Cp, Fp, e, a, d, ph, G, gFn, dx, dt, p_vol, p_rho, nu, act_strength):
     """Adjoint of :func:`_stress` for the affine-matrix adjoint ``G`` and the ``F[s+1]``
-    adjoint ``gFn``. Returns the adjoints of ``C[s]``, ``F[s]``, ``phi``, ``E`` and ``a``."""
+    adjoint ``gFn``. Returns the adjoints of ``C[s]``, ``F[s]``, ``presence``, ``stiffness`` and
+    ``a``."""
     eye = ti.Matrix.identity(float, 3)
     M = eye + dt * Cp
     Fn = M @ Fp
@@ -89,12 +90,12 @@ def _hessian_vjp(w, dw, g, i: ti.template(), j: ti.template(), k: ti.template())
 
 
 @ti.func
-def _absent_phi_vjp(ggrid: ti.template(), w, fx, vp, Cp, tu, e, base, ny, nz, dx, dt, p_vol,
+def _absent_presence_vjp(ggrid: ti.template(), w, fx, vp, Cp, tu, e, base, ny, nz, dx, dt, p_vol,
                     p_rho):
-    """The two terms of ``dL/dphi`` (through the mass and through ``A``; ``tu`` is the unit
+    """The two terms of ``dL/dpresence`` (through the mass and through ``A``; ``tu`` is the unit
     stress of :func:`~dbtool.sim.kernels._tau_unit`) of a robot particle whose presence is 0
-    (no mass, no stress, so no other adjoint): the p2g adjoint's node gather and ``d A / d phi``
-    only, the same arithmetic as :func:`p2g_grad`."""
+    (no mass, no stress, so no other adjoint): the p2g adjoint's node gather and
+    ``d A / d presence`` only, the same arithmetic as :func:`p2g_grad`."""
     sg = ti.Vector([0.0, 0.0, 0.0])
     so0 = ti.Vector([0.0, 0.0, 0.0])
     so1 = ti.Vector([0.0, 0.0, 0.0])
@@ -125,9 +126,10 @@ def _p2g_grad_kernel(multi: bool):
 
     @ti.kernel
     def p2g_grad(
-        x: nd(), v: nd(), C: nd(), F: nd(), phi: nd(), E: nd(), actp: nd(), adir: nd(), damp: nd(),
+        x: nd(), v: nd(), C: nd(), F: nd(), presence: nd(), stiffness: nd(), actp: nd(),
+        direction: nd(), damp: nd(),
         field: nd(), ggrid: nd(), oggrid: nd(), ngrid: nd(),
-        xg: nd(), vg: nd(), Cg: nd(), Fg: nd(), phig: nd(), Eg: nd(), actpg: nd(),
+        xg: nd(), vg: nd(), Cg: nd(), Fg: nd(), presenceg: nd(), stiffnessg: nd(), actpg: nd(),
         s: ti.i32, n: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
         lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
         dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
@@ -137,7 +139,7 @@ def _p2g_grad_kernel(multi: bool):
         ``ggrid = (dL/d mv, dL/d m)`` (``oggrid`` for an object particle with ``multi``, and the
         adjoint ``ngrid`` of the object's mass gradient), then the constitutive adjoint by hand.
         Writes the ``v``, ``C`` and ``F`` adjoints of substep ``s``, adds to its ``x`` adjoint and
-        accumulates the ``phi``, ``E`` and muscle-signal adjoints."""
+        accumulates the ``presence``, ``stiffness`` and muscle-signal adjoints."""
         lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
         for p in range(n):
             inv_dx = 1.0 / dx
@@ -146,10 +148,10 @@ def _p2g_grad_kernel(multi: bool):
             base = _base(xp, inv_dx, lo, hi)
             fx = xp * inv_dx - ti.cast(base, float)
             w, dw = _weights(fx)
-            ph = phi[p]
-            e = E[p]
+            ph = presence[p]
+            e = stiffness[p]
             a = actp[p]
-            d = adir[p]
+            d = direction[p]
             m = m_unit * ph
             vp = damp[p] * v[s, p]  # the scattered velocity (momentum / m)
             Cp = C[s, p]
@@ -161,9 +163,9 @@ def _p2g_grad_kernel(multi: bool):
                 obj = field[p] > 0.0
             if ph == 0.0 and not obj and ti.abs(Fg[s + 1, p]).max() == 0.0:
                 # an absent particle: only its presence adjoint is not zero
-                gm0, g_ph0 = _absent_phi_vjp(ggrid, w, fx, vp, Cp, tu, e, base, ny, nz, dx, dt,
+                gm0, g_ph0 = _absent_presence_vjp(ggrid, w, fx, vp, Cp, tu, e, base, ny, nz, dx, dt,
                                              p_vol, p_rho)
-                phig[p] = phig[p] + m_unit * gm0 + g_ph0
+                presenceg[p] = presenceg[p] + m_unit * gm0 + g_ph0
                 vg[s, p] = ti.Vector([0.0, 0.0, 0.0])
                 Cg[s, p] = ti.Matrix.zero(float, 3, 3)
                 Fg[s, p] = ti.Matrix.zero(float, 3, 3)
@@ -219,8 +221,8 @@ def _p2g_grad_kernel(multi: bool):
                                                    p_vol, p_rho, nu, act_strength)
             Cg[s, p] = g_C
             Fg[s, p] = g_F
-            phig[p] = phig[p] + m_unit * gm + g_ph
-            Eg[p] = Eg[p] + g_e
+            presenceg[p] = presenceg[p] + m_unit * gm + g_ph
+            stiffnessg[p] = stiffnessg[p] + g_e
             actpg[p] = actpg[p] + g_a
 
     return p2g_grad

@@ -49,10 +49,10 @@ class Scene:
 
 @dataclass
 class Material:
-    """Constants shared by every particle (per-particle stiffness ``E`` is a field).
+    """Constants shared by every particle (the Young's modulus ``stiffness`` is per particle).
 
     Defaults follow SoftZoo: Poisson ratio 0.2, density 1e3; ``act_strength`` scales the muscle
-    stress relative to the particle's ``E``; ``dt`` is the substep.
+    stress relative to the particle's ``stiffness``; ``dt`` is the substep.
     """
 
     nu: float = 0.2
@@ -65,19 +65,19 @@ class Material:
 class Particles:
     """Per-particle fields in the SoftZoo interface: fixed positions, evaluated fields.
 
-    ``phi`` is the effective occupancy (mass and stress scale with it; 0 = inactive tracer),
-    ``E`` the Young's modulus, ``wact`` the weight of each of the ``MAX_GROUPS`` control
-    channels, ``adir`` the unit actuator direction, ``glued`` 1 for clamped particles,
-    ``v0`` the initial velocity, ``damping`` a material damping rate, ``field`` 1 for the
-    particles of a task object (its own velocity field where the scene sets
+    ``presence`` is the effective occupancy (mass and stress scale with it; 0 = inactive
+    tracer), ``stiffness`` the Young's modulus, ``actuators`` the weight of each of the
+    ``MAX_GROUPS`` control channels, ``direction`` the unit actuator direction, ``glued`` 1 for
+    clamped particles, ``v0`` the initial velocity, ``damping`` a material damping rate,
+    ``field`` 1 for the particles of a task object (its own velocity field where the scene sets
     ``object_friction``).
     """
 
     x0: np.ndarray
-    phi: np.ndarray
-    E: np.ndarray
-    wact: np.ndarray
-    adir: np.ndarray
+    presence: np.ndarray
+    stiffness: np.ndarray
+    actuators: np.ndarray
+    direction: np.ndarray
     glued: np.ndarray
     v0: np.ndarray
     damping: np.ndarray | None = None
@@ -92,8 +92,8 @@ class Particles:
         if n == 0:
             raise InputError("the body is empty: no particles to simulate")
         shapes = {
-            "x0": (n, 3), "phi": (n,), "E": (n,), "wact": (n, K.MAX_GROUPS),
-            "adir": (n, 3), "glued": (n,), "v0": (n, 3), "damping": (n,), "field": (n,),
+            "x0": (n, 3), "presence": (n,), "stiffness": (n,), "actuators": (n, K.MAX_GROUPS),
+            "direction": (n, 3), "glued": (n,), "v0": (n, 3), "damping": (n,), "field": (n,),
         }
         for name, shape in shapes.items():
             if getattr(self, name) is None:
@@ -105,7 +105,7 @@ class Particles:
                 raise InputError(f"particle field {name} contains NaN or inf")
         if self.damping is not None and np.any(np.asarray(self.damping) < 0):
             raise InputError("particle field damping must be >= 0")
-        if not np.any(self.phi > 0):
+        if not np.any(self.presence > 0):
             raise InputError("the body is empty: every particle is inactive (occupancy 0)")
 
     def subset(self, idx: np.ndarray) -> Particles:
@@ -114,7 +114,8 @@ class Particles:
             return None if a is None else np.asarray(a)[idx]
 
         return Particles(**{k: take(getattr(self, k)) for k in (
-            "x0", "phi", "E", "wact", "adir", "glued", "v0", "damping", "field")})
+            "x0", "presence", "stiffness", "actuators", "direction", "glued", "v0", "damping",
+            "field")})
 
 
 def clamp_nodes(x0: np.ndarray, glued: np.ndarray, dx: float,

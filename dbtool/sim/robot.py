@@ -38,7 +38,7 @@ class Robot:
         return self.occupancy >= (self.threshold if threshold is None else threshold)
 
     def presence(self, threshold: float | None = None) -> np.ndarray:
-        """Effective occupancy ``phi = occ * [occ >= threshold]``; its gradient is passed
+        """Effective occupancy ``presence = occ * [occ >= threshold]``; its gradient is passed
         straight through to ``occupancy`` (SoftZoo)."""
         return np.where(self.active(threshold), self.occupancy, 0.0)
 

@@ -37,7 +37,7 @@ class Rollout:
 def _metric(task: Task, ep: Episode, x0: np.ndarray, x: np.ndarray, grad: bool):
     dtype = torch.float64
     xt = torch.tensor(x, dtype=dtype, requires_grad=grad)
-    phit = torch.tensor(ep.particles.phi, dtype=dtype, requires_grad=grad)
+    phit = torch.tensor(ep.particles.presence, dtype=dtype, requires_grad=grad)
     value = task.metric(ep, torch.tensor(x0, dtype=dtype), xt, phit)
     if not torch.isfinite(value):
         raise MetricError(f"task {task.name}: the metric is not finite")
@@ -70,11 +70,11 @@ def simulate(
     rollout = Rollout(value, positions, ep, actions)
     if grad:
         g = sim.backward(gx)
-        gphi = g["phi"] + gphi_direct
+        gphi = g["presence"] + gphi_direct
         rollout.grads = {
             "occupancy": _to_design(ep, gphi, robot.n),
-            "stiffness": _to_design(ep, g["E"], robot.n),
-            "actuators": _to_design(ep, g["wact"][:, : task.n_groups], robot.n),
+            "stiffness": _to_design(ep, g["stiffness"], robot.n),
+            "actuators": _to_design(ep, g["actuators"][:, : task.n_groups], robot.n),
             "actions": g["actions"][:, : task.n_groups],
         }
     return rollout

@@ -107,9 +107,9 @@ class Simulator:
 
     def _upload(self) -> None:
         p, f, b = self.q, self.np_dtype, self.body
-        self.set_particle_fields(self.p.phi, self.p.E, self.p.wact)
-        norm = np.linalg.norm(p.adir, axis=1, keepdims=True)
-        b.adir.from_numpy((p.adir / np.maximum(norm, 1e-12)).astype(f))
+        self.set_particle_fields(self.p.presence, self.p.stiffness, self.p.actuators)
+        norm = np.linalg.norm(p.direction, axis=1, keepdims=True)
+        b.direction.from_numpy((p.direction / np.maximum(norm, 1e-12)).astype(f))
         b.glued.from_numpy(np.asarray(p.glued, f))
         rate = np.zeros(self.n_sim) if p.damping is None else np.asarray(p.damping, float)
         b.damp.from_numpy(np.exp(-rate * self.mat.dt).astype(f))
@@ -122,10 +122,11 @@ class Simulator:
             self.grid.clamp.from_numpy(clamp_nodes(
                 self.p.x0, self.p.glued, self.scene.dx, self.scene.grid).astype(f).ravel())
 
-    def set_particle_fields(self, phi=None, E=None, wact=None) -> None:
+    def set_particle_fields(self, presence=None, stiffness=None, actuators=None) -> None:
         """Replace occupancy, stiffness or actuator weights (of every particle) without
         re-allocating."""
-        for name, value in (("phi", phi), ("E", E), ("wact", wact)):
+        fields = {"presence": presence, "stiffness": stiffness, "actuators": actuators}
+        for name, value in fields.items():
             if value is not None:
                 setattr(self.p, name, np.asarray(value))
                 value = self._moving(np.asarray(value))
@@ -224,7 +225,8 @@ class Simulator:
         """Reverse pass for a loss whose gradient w.r.t. the final ``x`` (and ``v``) is given;
         ``grad_x_steps[t]`` adds the gradient w.r.t. the positions of checkpoint ``t``.
 
-        Returns d loss / d ``phi``, ``E``, ``wact``, ``actions``, ``x0`` and ``v0``.
+        Returns d loss / d ``presence``, ``stiffness``, ``actuators``, ``actions``, ``x0`` and
+        ``v0``.
         """
         if self.adjoint is None:
             raise RuntimeError("this Simulator was built with requires_grad=False")
@@ -241,7 +243,7 @@ class Simulator:
         held = np.asarray(self.p.glued) > 0
         gx0 = np.asarray(grad_x)[held] + sum(np.asarray(s)[held]
                                               for s in (grad_x_steps or {}).values())
-        out = {k: self._every(g[k]) for k in ("phi", "E", "wact", "v0")}
+        out = {k: self._every(g[k]) for k in ("presence", "stiffness", "actuators", "v0")}
         out["x0"] = self._every(g["x0"], np.asarray(gx0, g["x0"].dtype))
         out["actions"] = g["actions"]
         return out

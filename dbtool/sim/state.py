@@ -87,16 +87,16 @@ class State:
 
 @dataclass
 class Body:
-    """Per-particle fields (``wact``: weight of each of ``MAX_GROUPS`` control channels,
-    ``adir``: unit muscle direction, ``glued``: 1 for clamped particles, ``damp``: momentum
+    """Per-particle fields (``actuators``: weight of each of ``MAX_GROUPS`` control channels,
+    ``direction``: unit muscle direction, ``glued``: 1 for clamped particles, ``damp``: momentum
     factor per substep of the material damping, ``field``: 1 for the particles of a task
     object that has its own velocity field), the per-control-step actuation ``act`` and the
     muscle signal ``actp`` of the current control step."""
 
-    phi: object
-    E: object
-    wact: object
-    adir: object
+    presence: object
+    stiffness: object
+    actuators: object
+    direction: object
     glued: object
     act: object
     actp: object
@@ -116,7 +116,7 @@ class Body:
     @property
     def stress(self) -> tuple:
         """The fields the stress and p2g kernels read, in their order."""
-        return self.phi, self.E, self.actp, self.adir, self.damp, self.field
+        return self.presence, self.stiffness, self.actp, self.direction, self.damp, self.field
 
 
 def flat(lead: int, dims: tuple[int, ...]) -> tuple[int]:
@@ -202,8 +202,8 @@ class Adjoint:
     v: object
     C: object
     F: object
-    phi: object
-    E: object
+    presence: object
+    stiffness: object
     actp: object
     scratch: object
     grid: object
@@ -223,7 +223,8 @@ class Adjoint:
         oscratch = pool(v3, flat(chunks, dims) if multi else (1,))
         oscratch.fill(0)
         return cls(pool(v3, (slots, n)), pool(v3, (slots, n)), state.C.grad, state.F.grad,
-                   body.phi.grad, body.E.grad, body.actp.grad, scratch, pool(v4, flat(1, dims)),
+                   body.presence.grad, body.stiffness.grad, body.actp.grad, scratch,
+                   pool(v4, flat(1, dims)),
                    oscratch, pool(v4, nodes), pool(v3, nodes), pool(v3, (n,)))
 
     @property
@@ -233,7 +234,7 @@ class Adjoint:
     @property
     def p2g(self) -> tuple:
         """The adjoints ``p2g_grad`` writes, in its order."""
-        return self.x, self.v, self.C, self.F, self.phi, self.E, self.actp
+        return self.x, self.v, self.C, self.F, self.presence, self.stiffness, self.actp
 
 
 @dataclass(frozen=True)

@@ -152,7 +152,7 @@ class Stepper:
         (:mod:`dbtool.sim.graphs`). A backward ``replay`` skips the last g2p: its output is
         the next checkpoint, which the adjoint pass does not read."""
         b = self.body
-        calls: list[Call] = [(K.actuation, (b.wact, b.act, b.actp, t, self.n))]
+        calls: list[Call] = [(K.actuation, (b.actuators, b.act, b.actp, t, self.n))]
         for s in range(self.substeps):
             calls += self.substep_calls(s, r, last=replay and s == self.substeps - 1,
                                         replay=replay)

@@ -23,15 +23,15 @@ def particle_colours(ep) -> np.ndarray:
     """Colour per simulator particle: actuator group, passive body, or task object."""
     p = ep.particles
     cols = np.array([BODY] * len(p.x0), dtype=object)
-    groups = p.wact.sum(1) > 0
-    cols[groups] = np.array(GROUP_COLOURS)[p.wact[groups].argmax(1)]
+    groups = p.actuators.sum(1) > 0
+    cols[groups] = np.array(GROUP_COLOURS)[p.actuators[groups].argmax(1)]
     cols[ep.object_mask] = OBJECT
     return cols
 
 
 def draw_frame(ax, ep, x: np.ndarray, cols, max_points: int, title: str | None) -> None:
     """Draw one frame of a rollout (active particles, colliders, ground) on a 3-D axis."""
-    keep = ep.particles.phi > 0
+    keep = ep.particles.presence > 0
     idx = np.flatnonzero(keep)
     if len(idx) > max_points:
         idx = idx[np.linspace(0, len(idx) - 1, max_points).astype(int)]

@@ -30,8 +30,8 @@ class Balancing(Task):
         c = self.stick_centre()
         return np.array([c[0] - 0.04, GROUND + STICK[1], c[2] - 0.04])
 
-    def metric(self, ep, x0, x, phi):
+    def metric(self, ep, x0, x, presence):
         m = ep.robot_mask
-        a = soft_occupancy(x0[m], phi[m], ep.scene)
-        b = soft_occupancy(x[m], phi[m], ep.scene)
+        a = soft_occupancy(x0[m], presence[m], ep.scene)
+        b = soft_occupancy(x[m], presence[m], ep.scene)
         return soft_iou(a, b)

@@ -96,7 +96,7 @@ class Task:
         """The prescribed open-loop actuation, shape ``(n_steps, n_groups)``."""
         return np.zeros((n_steps, self.n_groups))
 
-    def metric(self, ep: Episode, x0: torch.Tensor, x: torch.Tensor, phi: torch.Tensor):
+    def metric(self, ep: Episode, x0: torch.Tensor, x: torch.Tensor, presence: torch.Tensor):
         """Differentiable task metric (higher is better) from initial and final positions."""
         raise NotImplementedError
 
@@ -124,14 +124,14 @@ class Task:
             raise InputError(f"task {self.name} needs {self.n_groups} actuator groups, "
                              f"the robot has {robot.actuators.shape[1]}")
         xr, idx = self.place(robot)
-        phi = (robot.presence() * self.attachment(robot))[idx]
-        wact = np.zeros((len(idx), MAX_GROUPS))
-        wact[:, : self.n_groups] = robot.actuators[idx]
-        adir = robot.particle_directions()[idx] if self.n_groups else np.tile(
+        presence = (robot.presence() * self.attachment(robot))[idx]
+        actuators = np.zeros((len(idx), MAX_GROUPS))
+        actuators[:, : self.n_groups] = robot.actuators[idx]
+        direction = robot.particle_directions()[idx] if self.n_groups else np.tile(
             (0.0, 1.0, 0.0), (len(idx), 1))
         stiff = robot.stiffness[idx]
         glued = np.zeros(len(idx))
-        parts = [(xr, phi, stiff, wact, adir, glued, idx)]
+        parts = [(xr, presence, stiff, actuators, direction, glued, idx)]
         extra = self.extra_particles(robot)
         if extra is not None:
             parts.append(extra)
@@ -146,9 +146,10 @@ class Task:
         v0 = np.zeros_like(x0)
         v0[:n_robot] = self.initial_velocity
         particles = Particles(
-            x0=x0, phi=np.concatenate([p[1] for p in parts]),
-            E=np.concatenate([p[2] for p in parts]), wact=np.concatenate([p[3] for p in parts]),
-            adir=np.concatenate([p[4] for p in parts]),
+            x0=x0, presence=np.concatenate([p[1] for p in parts]),
+            stiffness=np.concatenate([p[2] for p in parts]),
+            actuators=np.concatenate([p[3] for p in parts]),
+            direction=np.concatenate([p[4] for p in parts]),
             glued=np.concatenate([p[5] for p in parts]), v0=v0,
             damping=np.where(np.arange(len(x0)) < n_robot, self.damping, 0.0) if self.damping
             else None,

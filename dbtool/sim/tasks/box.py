@@ -44,6 +44,6 @@ class MovingBox(Task):
     def controller(self, n_steps: int = 100) -> np.ndarray:
         return ramp((0.0, 0.0), (1.0, 0.0), n_steps)
 
-    def metric(self, ep, x0, x, phi):
+    def metric(self, ep, x0, x, presence):
         m = ep.object_mask
-        return centroid(x[m], phi[m])[0] - centroid(x0[m], phi[m])[0]
+        return centroid(x[m], presence[m])[0] - centroid(x0[m], presence[m])[0]

@@ -34,6 +34,6 @@ class Crawling(Task):
         t = np.arange(n_steps)[:, None] * SUBSTEPS * self.material.dt
         return AMPLITUDE * np.sin(2 * np.pi * FREQUENCY * t + PHASES[None, :])
 
-    def metric(self, ep, x0, x, phi):
+    def metric(self, ep, x0, x, presence):
         m = ep.robot_mask
-        return centroid(x[m], phi[m])[0] - centroid(x0[m], phi[m])[0]
+        return centroid(x[m], presence[m])[0] - centroid(x0[m], presence[m])[0]

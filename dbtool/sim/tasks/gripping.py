@@ -102,12 +102,12 @@ class Gripping(Task):
         (centre, side), = self.objects()
         x = ep.particles.x0
         inside = np.all(np.abs(x - centre) < side / 2 + SPACING, axis=1) & ep.robot_mask
-        ep.particles.phi = np.where(inside, 0.0, ep.particles.phi)
+        ep.particles.presence = np.where(inside, 0.0, ep.particles.presence)
         ep.design_index = np.where(inside, -1, ep.design_index)
         axis, plane = self.mirror_plane()
         fingers = ep.robot_mask & (ep.particles.glued == 0)
         finger = np.where(fingers, np.where(x[:, axis] < plane, 1, 2), 0)  # 1 designed, 2 mirror
-        active = ep.particles.phi > 0
+        active = ep.particles.presence > 0
         tips = {}
         for f in (1, 2):
             sel = (finger == f) & active
@@ -122,15 +122,15 @@ class Gripping(Task):
         return np.concatenate([ramp((1.0, 0.0), (0.0, 0.0), half),
                                ramp((1.0, 0.0), (0.0, 0.0), n_steps - half)])
 
-    def metric(self, ep, x0, x, phi):
+    def metric(self, ep, x0, x, presence):
         m = ep.object_mask
-        return centroid(x[m], phi[m])[1] - centroid(x0[m], phi[m])[1]
+        return centroid(x[m], presence[m])[1] - centroid(x0[m], presence[m])[1]
 
     @staticmethod
     def root(ep: Episode, depth: float = 0.003) -> np.ndarray:
         """Mask of the designed finger's root: its active particles within ``depth`` of its
         top, next to the clamped base (3 mm at the export's scale by default)."""
-        f = (ep.info["finger"] == 1) & (ep.particles.phi > 0)
+        f = (ep.info["finger"] == 1) & (ep.particles.presence > 0)
         y = ep.particles.x0[:, 1]
         return f & (y >= y[f].max() - depth)
 

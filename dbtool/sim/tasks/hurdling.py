@@ -39,6 +39,6 @@ class Hurdling(Task):
         out[:k] = ramp((0.0, 0.0), (1.0, 0.3), 30)[:k]
         return out
 
-    def metric(self, ep, x0, x, phi):
+    def metric(self, ep, x0, x, presence):
         m = ep.robot_mask
-        return centroid(x[m], phi[m])[0] - centroid(x0[m], phi[m])[0]
+        return centroid(x[m], presence[m])[0] - centroid(x0[m], presence[m])[0]

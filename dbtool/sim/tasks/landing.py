@@ -30,7 +30,7 @@ class Landing(Task):
         centre = self.target() + np.array([-0.08, 0.045, 0.0])
         return centre - 0.04
 
-    def metric(self, ep, x0, x, phi):
+    def metric(self, ep, x0, x, presence):
         m = ep.robot_mask
-        p = centroid(x[m], phi[m])
+        p = centroid(x[m], presence[m])
         return torch.exp(-torch.linalg.norm(p - torch.as_tensor(self.target(), dtype=x.dtype)))
