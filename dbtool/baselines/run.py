@@ -15,13 +15,13 @@ from dbtool.errors import InputError
 from dbtool.robotize.actuators import reference_robot
 from dbtool.sim.tasks import N_STEPS, get_task
 
-METHODS = ("diffusebot", "particle")  # what `dbtool design --method` accepts
+DESIGN_METHODS = ("diffusebot", "particle")  # what `dbtool design --method` accepts
 
 
 def check_method(method: str) -> str:
     """``method`` if it names a design method, else ``ValueError``."""
-    if method not in METHODS:
-        raise InputError(f"unknown method {method!r}; choose {' or '.join(METHODS)}")
+    if method not in DESIGN_METHODS:
+        raise InputError(f"unknown method {method!r}; choose {' or '.join(DESIGN_METHODS)}")
     return method
 
 

@@ -32,7 +32,6 @@ from dbtool.viz.robot import draw_robot  # noqa: E402
 
 COLUMNS = ("method", "task", "seed", "status", "metric", "budget_units", "budget_used",
            "forward_episodes", "gradient_episodes", "wall_s", "worker", "commit", "error")
-METHODS = TITLES  # display names, in table order
 STATUSES = ("done", "failed")
 _FLOATS = ("metric", "budget_units", "budget_used", "wall_s")
 _INTS = ("seed", "forward_episodes", "gradient_episodes")
@@ -116,7 +115,7 @@ def summarise(rows: list[dict]) -> dict:
     ``methods`` and ``tasks`` (table order), ``mean_rank`` per method (None without any rank),
     ``seeds`` (distinct seed counts per cell) and ``budgets`` (distinct ``budget_units``)."""
     cells = _cells(rows)
-    methods = _ordered({m for m, _, _ in cells}, METHODS)
+    methods = _ordered({m for m, _, _ in cells}, TITLES)
     tasks = _ordered({t for _, t, _ in cells}, TASKS)
     out: dict[tuple[str, str], dict] = {}
     for m in methods:
@@ -147,7 +146,7 @@ def summarise(rows: list[dict]) -> dict:
 
 
 def method_name(method: str) -> str:
-    return METHODS.get(method, method)
+    return TITLES.get(method, method)
 
 
 def task_title(task: str) -> str:

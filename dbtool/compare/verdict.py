@@ -9,7 +9,8 @@ from pathlib import Path
 
 from dbtool.atomic import atomic_write
 from dbtool.compare.budget import GRAD_COST
-from dbtool.compare.report import METHODS, TASKS, cell_dir
+from dbtool.compare.methods import METHODS, TITLES
+from dbtool.compare.report import TASKS, cell_dir
 
 
 def verdicts(rows: list[dict], method: str = "diffusebot") -> list[dict]:
@@ -91,13 +92,13 @@ def why_figure(out_dir: str | Path, task: str, methods: list[str], path: str | P
         if pts:
             x, y = zip(*pts, strict=True)
             best = [max(y[: k + 1]) for k in range(len(y))]
-            line = ax.step(x, best, where="post", label=f"{METHODS.get(m, m)} (best so far)")
+            line = ax.step(x, best, where="post", label=f"{TITLES.get(m, m)} (best so far)")
             ax.plot(x, y, "o", ms=3, alpha=0.5, color=line[0].get_color())
         img = fig.add_subplot(grid[i, 1:])
         if (folder / "montage.png").is_file():
             img.imshow(mpimg.imread(folder / "montage.png"))
         img.set_axis_off()
-        img.set_title(f"{METHODS.get(m, m)}: final design", fontsize=9)
+        img.set_title(f"{TITLES.get(m, m)}: final design", fontsize=9)
     ax.set(xlabel="budget spent (forward-episode units)", ylabel="metric",
            title=f"{task}, seed {seed}")
     ax.legend(fontsize=8)

@@ -57,7 +57,7 @@ from dbtool.sim.tasks.base import SPACING
 MIN_POINTS = 50
 FAR = 1.0  # a cloud whose median |x| (max-norm) exceeds this is not in the prior's frame
 MIN_PARTICLES = 100  # minimum-volume guard on the kept component
-METHODS = ("dpsr", "direct_sdf")
+RECONSTRUCTIONS = ("dpsr", "direct_sdf")
 
 
 class RobotizeError(InputError):
@@ -178,14 +178,14 @@ def robotize(x, task: Task, cfg: RobotizeConfig | None = None, noise: float | No
     """Psi: the robot of cloud ``x`` (prior frame) on ``task``'s design lattice.
 
     ``noise``: the std of the Gaussian noise in ``x`` (prior frame) when it is known, e.g.
-    ``dbtool.prior.sampling.diffusion.noise_std(t)`` for a diffusion sample x_t; ``None`` means a clean
-    cloud. ``method``: ``dpsr`` (this module) or ``direct_sdf`` (the Figure 8 baseline,
+    ``dbtool.prior.sampling.diffusion.noise_std(t)`` for a diffusion sample x_t; ``None`` means a
+    clean cloud. ``method``: ``dpsr`` (this module) or ``direct_sdf`` (the Figure 8 baseline,
     :mod:`dbtool.robotize.direct_sdf`).
     """
     cfg = cfg or RobotizeConfig()
-    if method not in METHODS:
+    if method not in RECONSTRUCTIONS:
         raise RobotizeError(f"unknown robotizing method {method!r}; choose one of "
-                            f"{', '.join(METHODS)}")
+                            f"{', '.join(RECONSTRUCTIONS)}")
     xt = torch.tensor(check_cloud(x), dtype=dtype, requires_grad=True)
     if method == "direct_sdf":
         occ, place, w, n = direct_occupancy(xt, task, cfg)
