@@ -209,7 +209,7 @@ def run(a, cache, prior, task: str):  # noqa: C901 - one branch per experiment
                 + " / ".join(f"{k:.2f}" for k in r["kept"]) + ")", summary(r["chamfer"])]
                for v, r in rows.items()])
     else:  # text
-        from dbtool.prior.metrics import chamfer_to_family
+        from dbtool.prior.training.metrics import chamfer_to_family
 
         prompt, family = ex.TEXT_PAIRS[task]
         rows = {}
@@ -264,7 +264,7 @@ def main() -> None:
     runtime.init(arch="cpu")
     prior = None
     if a.experiment != "bandit":
-        from dbtool.prior.pipeline import Prior
+        from dbtool.prior.sampling.pipeline import Prior
 
         prior = Prior.load(a.base, with_upsampler=False, version=a.prior)
     cache = ex.Cache(RESULTS / "codesign-cache")

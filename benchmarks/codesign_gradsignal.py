@@ -35,7 +35,7 @@ def gradient(prior, clouds: np.ndarray, idx: np.ndarray, guidance: float, seed: 
     """d(mean diffusion loss of ``clouds[idx]``)/dc at the null embedding."""
     from dbtool.codesign.embedding import guided_loss
     from dbtool.codesign.experiments import NULL
-    from dbtool.prior.diffusion import SCALE
+    from dbtool.prior.sampling.diffusion import SCALE
 
     gen = torch.Generator().manual_seed(seed)
     c = NULL.clone().requires_grad_(True)
@@ -81,7 +81,7 @@ def main() -> None:
     ap.add_argument("--prior", type=int, default=2, help="shipped prior version")
     a = ap.parse_args()
 
-    from dbtool.prior.pipeline import Prior
+    from dbtool.prior.sampling.pipeline import Prior
     from dbtool.sim import runtime
 
     runtime.init(arch="cpu")

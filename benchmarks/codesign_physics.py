@@ -141,7 +141,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=None,
                     help="result file (default benchmarks/results/codesign-physics.json)")
     a = ap.parse_args()
-    from dbtool.prior.pipeline import Prior
+    from dbtool.prior.sampling.pipeline import Prior
 
     prior = Prior.load()
     a.cache.mkdir(parents=True, exist_ok=True)

@@ -40,13 +40,13 @@ from _results import write_result  # noqa: E402
 
 # (stage, module, attribute path): the entry points whose time is charged to the stage
 STAGES = [
-    ("base model", "dbtool.prior.pipeline", "Prior.eps"),
+    ("base model", "dbtool.prior.sampling.pipeline", "Prior.eps"),
     ("embedding training", "dbtool.codesign.embedding", "mixture_step"),
     ("embedding training", "dbtool.codesign.embedding", "train_step"),
     ("robotizing", "dbtool.robotize.robotizer", "robotize"),
     ("robotizing", "dbtool.robotize.robotizer", "Robotized.vjp"),
     ("simulation", "dbtool.sim.rollout", "simulate"),
-    ("upsampling", "dbtool.prior.pipeline", "Prior.upsample"),
+    ("upsampling", "dbtool.prior.sampling.pipeline", "Prior.upsample"),
     ("figures", "dbtool.viz.render", "montage"),
     ("figures", "dbtool.codesign.design_run", "performance_figure"),
 ]
@@ -144,7 +144,7 @@ def main() -> None:
 
     import dbtool.robotize  # noqa: F401 - every module whose bindings are wrapped
     from dbtool.codesign.design_run import DesignRun, Settings
-    from dbtool.prior.pipeline import Prior
+    from dbtool.prior.sampling.pipeline import Prior
     from dbtool.sim import runtime
 
     runtime.init(arch="cpu")

@@ -129,7 +129,7 @@ def _check_export(folder: Path, rep: dict) -> dict:
 
 def _random_designs(n: int, seed: int):
     from dbtool.design import Design
-    from dbtool.prior import shapes
+    from dbtool.prior.corpora import shapes
     from dbtool.robotize.robotizer import robotize
     from dbtool.sim.tasks import TASKS, get_task
 

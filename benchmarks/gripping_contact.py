@@ -53,7 +53,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path)
     a = ap.parse_args()
     from dbtool.codesign.experiments import NULL
-    from dbtool.prior.pipeline import Prior
+    from dbtool.prior.sampling.pipeline import Prior
 
     clouds = Prior.load().sample(embedding=NULL, n=a.samples, seed=a.seed).clouds
     rows = []

@@ -63,10 +63,10 @@ def train_steps(batch: int, points: int, repeats: int, version: int) -> dict:
     """Seconds per training step of the base model, bf16 autocast and float32 (one thread)."""
     import torch
 
-    from dbtool.prior.diffusion import diffusion_loss
-    from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
-    from dbtool.prior.pipeline import load_model, weights_dir
-    from dbtool.prior.schedulers import NoiseSchedule
+    from dbtool.prior.sampling.diffusion import diffusion_loss
+    from dbtool.prior.sampling.model import ModelConfig, PointDiffusionTransformer
+    from dbtool.prior.sampling.pipeline import load_model, weights_dir
+    from dbtool.prior.sampling.schedulers import NoiseSchedule
 
     torch.set_num_threads(1)
     cfg = ModelConfig(**load_model(weights_dir(version) / "base.pt")[1]["model"])
@@ -97,7 +97,7 @@ def worker(kind: str, batch: int, steps: int, repeats: int, threads: int | None,
     import torch
 
     from dbtool.precision import use_bf16
-    from dbtool.prior.pipeline import Prior
+    from dbtool.prior.sampling.pipeline import Prior
 
     if kind == "train":
         t = train_steps(batch, steps, max(repeats, 5), version)
@@ -133,7 +133,7 @@ def worker(kind: str, batch: int, steps: int, repeats: int, threads: int | None,
 
 
 def main(argv: list[str] | None = None) -> int:
-    from dbtool.prior.pipeline import DEFAULT_VERSION
+    from dbtool.prior.sampling.pipeline import DEFAULT_VERSION
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="tiny cases (smoke test)")

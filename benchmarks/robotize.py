@@ -37,7 +37,7 @@ NOISE_FAMILIES = ["ball", "star", "table", "ring", "ushape", "quadruped", "plate
 def speed(repeats: int, grids: list[int], episode: bool) -> list[dict]:
     import torch
 
-    from dbtool.prior.shapes import make_shape
+    from dbtool.prior.corpora.shapes import make_shape
     from dbtool.robotize.cloud_metric import BAND
     from dbtool.robotize.robotizer import RobotizeConfig, robotize
     from dbtool.sim.rollout import simulate
@@ -75,7 +75,7 @@ def speed(repeats: int, grids: list[int], episode: bool) -> list[dict]:
 
 
 def clean(families: list[str]) -> dict:
-    from dbtool.prior.shapes import make_shape
+    from dbtool.prior.corpora.shapes import make_shape
     from dbtool.robotize.quality import iou, mesh_inside
     from dbtool.robotize.robotizer import robotize
     from dbtool.sim.tasks import get_task
@@ -92,8 +92,8 @@ def clean(families: list[str]) -> dict:
 
 
 def noise(families: list[str], per_family: int, steps: list[int]) -> dict:
-    from dbtool.prior.diffusion import noise_std
-    from dbtool.prior.shapes import make_shape
+    from dbtool.prior.corpora.shapes import make_shape
+    from dbtool.prior.sampling.diffusion import noise_std
     from dbtool.robotize.quality import iou, noisy
     from dbtool.robotize.robotizer import lattice_dims, robotize
     from dbtool.robotize.solid import components
@@ -129,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
     from _results import write_result
 
-    from dbtool.prior.shapes import FAMILIES
+    from dbtool.prior.corpora.shapes import FAMILIES
 
     repeats = a.repeats or (1 if a.quick else 5)
     t0 = time.time()

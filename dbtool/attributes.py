@@ -128,8 +128,8 @@ def attribute_prompts(families: list[str] | None = None) -> list[dict]:
     """For every graded attribute of every family of the attribute corpus: the prompt with
     its low word and the one with its high word (an attribute without a low word, "tapered",
     is compared with the plain noun phrase), with the family's part count of shape 0."""
-    from dbtool.prior import corpus
-    from dbtool.prior.words import ADJECTIVES, count_phrase, noun_phrase
+    from dbtool.prior.corpora import corpus
+    from dbtool.prior.corpora.words import ADJECTIVES, count_phrase, noun_phrase
 
     rows = []
     for fam in families or list(corpus.FAMILIES):
@@ -151,7 +151,7 @@ def attribute_control(prior, rows: list[dict], n: int = 4, seed: int = 0, steps:
                       guidance: float = 3.0, parts: Callable = _fresh) -> list[dict]:
     """Sample ``n`` clouds of each row's low and high prompt from the same noise and measure
     the attribute: a pair is right when the high prompt's cloud measures higher. ``parts``
-    (``dbtool.prior.evaluate.Parts.get``) keeps finished rows for a resumed evaluation."""
+    (``dbtool.prior.training.evaluate.Parts.get``) keeps finished rows for a resumed evaluation."""
     def row(r: dict) -> dict:
         lo = prior.sample(r["low"], n=n, guidance=guidance, steps=steps, seed=seed).clouds
         hi = prior.sample(r["high"], n=n, guidance=guidance, steps=steps, seed=seed).clouds
@@ -168,7 +168,7 @@ def legs_control(prior, bodies=("block", "ball", "disk"), counts=(3, 4, 6), n: i
                  seed: int = 0, steps: int = 32, guidance: float = 3.0,
                  parts: Callable = _fresh) -> list[dict]:
     """"a BODY with N legs": how many of ``n`` samples stand on exactly N separate contacts."""
-    from dbtool.prior.words import NUMBERS
+    from dbtool.prior.corpora.words import NUMBERS
 
     def row(prompt: str, k: int) -> dict:
         clouds = prior.sample(prompt, n=n, guidance=guidance, steps=steps, seed=seed).clouds

@@ -38,12 +38,12 @@ from dataclasses import replace
 
 import matplotlib.pyplot as plt
 import numpy as np
-import torch
 from IPython.display import Image, display
 
 from dbtool.codesign.config import preset
 from dbtool.codesign.embedding import EmbeddingOptimiser, caption_atoms
-from dbtool.prior.pipeline import Prior
+from dbtool.prior.sampling.pipeline import Prior
+from dbtool.prior.sampling.text import null
 from dbtool.robotize import robotize
 from dbtool.sim.tasks import TASKS, get_task
 from dbtool.viz.robot import robot_figure
@@ -74,7 +74,7 @@ curves = {}
 for task_name in RUN:
     task = get_task(task_name)
     emb = settings(task_name)
-    opt = EmbeddingOptimiser(prior, task, emb, torch.zeros(1, 384), seed=0, n_steps=N_STEPS)
+    opt = EmbeddingOptimiser(prior, task, emb, null(), seed=0, n_steps=N_STEPS)
     panels = []
     for _ in range(emb.epochs):
         row = opt.step()

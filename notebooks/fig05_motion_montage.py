@@ -40,7 +40,7 @@ from pathlib import Path
 from IPython.display import Image, display
 
 from dbtool.codesign.design_run import DesignRun, Settings
-from dbtool.prior.pipeline import Prior
+from dbtool.prior.sampling.pipeline import Prior
 from dbtool.sim.tasks import TASKS
 
 QUICK = os.environ.get("DBTOOL_QUICK", "0") == "1"

@@ -35,8 +35,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from IPython.display import Image
 
-from dbtool.prior.diffusion import noise_std
-from dbtool.prior.shapes import make_shape
+from dbtool.prior.corpora.shapes import make_shape
+from dbtool.prior.sampling.diffusion import noise_std
 from dbtool.robotize.cloud_metric import evaluate
 from dbtool.robotize.quality import iou, noisy
 from dbtool.robotize.robotizer import lattice_dims, robotize

@@ -33,8 +33,8 @@ import numpy as np
 import torch
 from IPython.display import Image
 
-from dbtool.prior.metrics import chamfer_matrix
-from dbtool.prior.pipeline import Prior
+from dbtool.prior.sampling.pipeline import Prior
+from dbtool.prior.training.metrics import chamfer_matrix
 from dbtool.viz.clouds import cloud_grid
 
 QUICK = os.environ.get("DBTOOL_QUICK", "0") == "1"
@@ -83,7 +83,7 @@ for prompt, ds in table.items():
 # family); the numbers are in the model card.
 
 # %%
-from dbtool.prior.evaluate import slerp
+from dbtool.prior.training.evaluate import slerp
 
 a, b = prior.embed(["a ball", "a star"])
 US = np.linspace(0, 1, 4 if QUICK else 6)
@@ -100,7 +100,7 @@ Image("fig11_interpolation.png")
 # samples of the first prompt into crawling robots (colours: the four actuator groups).
 
 # %%
-from dbtool.prior.diffusion import noise_std
+from dbtool.prior.sampling.diffusion import noise_std
 from dbtool.robotize.robotizer import robotize
 from dbtool.sim.tasks import get_task
 from dbtool.viz.robot import robot_figure

@@ -38,14 +38,14 @@
 import os
 from dataclasses import replace
 
-import torch
 from IPython.display import Image, display
 
 from dbtool.codesign.config import PROMPT_T_MIN, preset
 from dbtool.codesign.embedding import score
 from dbtool.codesign.langevin import codesign_sample
-from dbtool.prior.metrics import chamfer_to_family
-from dbtool.prior.pipeline import Prior
+from dbtool.prior.sampling import text
+from dbtool.prior.sampling.pipeline import Prior
+from dbtool.prior.training.metrics import chamfer_to_family
 from dbtool.robotize import robotize
 from dbtool.sim.tasks import get_task
 from dbtool.viz.robot import robot_figure
@@ -56,7 +56,7 @@ PAIRS = [p for p in [("balancing", "a ball", "ball"), ("crawling", "a star", "st
                      ("hurdling", "a pair of wings", "wings"), ("box", "thick", None)]
          if not QUICK or p[0] in ("crawling", "box")]
 prior = Prior.load(with_upsampler=False)
-null = torch.zeros(1, 384)
+null = text.null()
 
 
 # %% [markdown]

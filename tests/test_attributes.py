@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from dbtool.attributes import MEASURES, legs
-from dbtool.prior.corpus import make_shape
-from dbtool.prior.words import LOW
+from dbtool.prior.corpora.corpus import make_shape
+from dbtool.prior.corpora.words import LOW
 
 CASES = [("disk", "thickness"), ("cylinder", "height"), ("egg", "length"), ("plate", "width"),
          ("bar", "roundness"), ("finger", "taper"), ("worm", "curve"), ("ring", "thickness")]
@@ -34,7 +34,7 @@ def test_legs_are_counted_on_the_ground():
 
 def test_attribute_control_runs_on_a_prior():
     from dbtool.attributes import attribute_control, attribute_prompts, legs_control
-    from dbtool.prior.pipeline import Prior
+    from dbtool.prior.sampling.pipeline import Prior
 
     rows = attribute_prompts(["disk", "finger", "legged_ball"])
     assert {"family": "disk", "attribute": "thickness", "low": "a thin disk",

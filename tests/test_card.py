@@ -1,11 +1,12 @@
-"""The model card renders every measured section from its input files (dbtool.prior.card)."""
+"""The model card renders every measured section from its input files
+(dbtool.prior.training.card)."""
 
 from __future__ import annotations
 
 import json
 
-from dbtool.prior import card
-from dbtool.prior.pipeline import load_model, weights_dir
+from dbtool.prior.sampling.pipeline import load_model, weights_dir
+from dbtool.prior.training import card
 
 
 def _eval_v2() -> dict:

@@ -13,9 +13,9 @@ from dbtool.codesign.embedding import (
     guided_loss,
     train_step,
 )
-from dbtool.prior.diffusion import diffusion_loss
-from dbtool.prior.pipeline import Prior
-from dbtool.prior.shapes import make_shape
+from dbtool.prior.corpora.shapes import make_shape
+from dbtool.prior.sampling.diffusion import diffusion_loss
+from dbtool.prior.sampling.pipeline import Prior
 from dbtool.sim.tasks import get_task
 
 

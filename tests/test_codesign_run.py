@@ -15,7 +15,7 @@ from dbtool.codesign.config import CodesignConfig, preset
 from dbtool.codesign.design_run import DesignRun, RunError, Settings
 from dbtool.codesign.langevin import clip_rms, codesign_sample, rms, stops
 from dbtool.design import Design
-from dbtool.prior.pipeline import Prior
+from dbtool.prior.sampling.pipeline import Prior
 from dbtool.provenance import config_hash, git_commit
 from dbtool.sim.tasks import get_task
 
@@ -237,7 +237,7 @@ def test_design_cli_bad_input_fails_cleanly(tmp_path):
 
 def test_text_feedback_adds_its_own_guidance_term(prior, tmp_path):
     from dbtool.codesign.config import PROMPT_T_MIN
-    from dbtool.prior.diffusion import guided_eps
+    from dbtool.prior.sampling.diffusion import guided_eps
 
     run = DesignRun(tmp_path / "r", _settings(prompt="a star", prompt_guidance=2.0), prior)
     (c, s), (h, sh, t_min) = run.conds()

@@ -7,8 +7,8 @@ import re
 import numpy as np
 import pytest
 
-from dbtool.prior import corpus, shapes
-from dbtool.prior.words import (
+from dbtool.prior.corpora import corpus, shapes
+from dbtool.prior.corpora.words import (
     ADJECTIVES,
     HELDOUT_ADJECTIVES,
     HELDOUT_TEMPLATES,

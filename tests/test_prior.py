@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 import torch
 
-from dbtool.prior import shapes, text
-from dbtool.prior.diffusion import diffusion_loss, guided_eps
-from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
-from dbtool.prior.pipeline import CheckpointError, Prior, load_model
-from dbtool.prior.schedulers import NoiseSchedule
-from dbtool.prior.train import TrainConfig, export_weights, read_log, resumed_config, train
+from dbtool.prior.corpora import shapes
+from dbtool.prior.sampling import text
+from dbtool.prior.sampling.diffusion import diffusion_loss, guided_eps
+from dbtool.prior.sampling.model import ModelConfig, PointDiffusionTransformer
+from dbtool.prior.sampling.pipeline import CheckpointError, Prior, load_model
+from dbtool.prior.sampling.schedulers import NoiseSchedule
+from dbtool.prior.training.train import TrainConfig, export_weights, read_log, resumed_config, train
 
 TINY = dict(width=32, heads=2, latents=8, depth=1, decoder_layers=1)
 
@@ -134,7 +135,7 @@ class Interrupt(Exception):
 
 
 def test_training_resumes_bit_for_bit_after_an_interruption(tmp_path, monkeypatch):
-    from dbtool.prior import train as train_mod
+    from dbtool.prior.training import train as train_mod
 
     cfg = TrainConfig(kind="base", steps=6, batch=2, subset=16, per_family=1, ckpt_every=2,
                       log_every=1, warmup=2, model=ModelConfig(**TINY))
@@ -223,7 +224,7 @@ def test_guidance_out_of_range_is_refused():
 
 
 def test_paraphrases_are_not_training_captions():
-    from dbtool.prior.evaluate import PARAPHRASES
+    from dbtool.prior.training.evaluate import PARAPHRASES
 
     seen = {c for fam in shapes.FAMILIES for i in range(40)
             for c in shapes.make_shape(fam, i, n_points=8).captions}
@@ -231,7 +232,7 @@ def test_paraphrases_are_not_training_captions():
 
 
 def test_evaluation_runs_every_part():
-    from dbtool.prior.evaluate import evaluate, prompt_of
+    from dbtool.prior.training.evaluate import evaluate, prompt_of
 
     assert prompt_of("bar") == "a bar" and prompt_of("wings") == "a pair of wings"
     prior = Prior(tiny_model(), bf16=False)
@@ -264,7 +265,7 @@ def test_evaluation_runs_every_part():
 
 
 def test_gradualness_tells_a_jump_from_a_blend():
-    from dbtool.prior.evaluate import gradualness
+    from dbtool.prior.training.evaluate import gradualness
 
     gen = torch.Generator().manual_seed(0)
     a = torch.rand(3, 64, 3, generator=gen) * torch.tensor([1.0, 0.2, 0.2])  # bars
@@ -276,7 +277,7 @@ def test_gradualness_tells_a_jump_from_a_blend():
 
 
 def test_chamfer_matrix_matches_the_definition():
-    from dbtool.prior.metrics import chamfer_matrix, one_nna
+    from dbtool.prior.training.metrics import chamfer_matrix, one_nna
 
     g = torch.Generator().manual_seed(0)
     a, b = torch.rand(3, 50, 3, generator=g), torch.rand(7, 40, 3, generator=g)
@@ -291,8 +292,8 @@ def test_chamfer_matrix_matches_the_definition():
 
 
 def test_training_on_the_attribute_corpus_caches_its_caption_embeddings(tmp_path):
-    from dbtool.prior import corpus as corpus_v2
-    from dbtool.prior.train import caption_embeddings, load_corpus
+    from dbtool.prior.corpora import corpus as corpus_v2
+    from dbtool.prior.training.train import caption_embeddings, load_corpus
 
     cfg = TrainConfig(kind="base", steps=2, batch=2, subset=16, per_family=1, ckpt_every=2,
                       log_every=1, warmup=1, corpus=2, model=ModelConfig(**TINY))
@@ -315,7 +316,7 @@ def test_training_on_the_attribute_corpus_caches_its_caption_embeddings(tmp_path
 
 
 def test_evaluation_on_the_attribute_corpus():
-    from dbtool.prior.evaluate import evaluate, prompt_of
+    from dbtool.prior.training.evaluate import evaluate, prompt_of
 
     assert prompt_of("legged_block", 2) == "a block with four legs"  # "block" is shared
     assert prompt_of("finger", 2) == "a finger"

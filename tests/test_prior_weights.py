@@ -10,9 +10,9 @@ import torch
 from cli_inprocess import run_cli
 
 from dbtool.pointcloud import load_ply
-from dbtool.prior.evaluate import evaluate
-from dbtool.prior.metrics import chamfer_matrix
-from dbtool.prior.pipeline import BASE_WEIGHTS, UPSAMPLER_WEIGHTS, CheckpointError, Prior
+from dbtool.prior.sampling.pipeline import BASE_WEIGHTS, UPSAMPLER_WEIGHTS, CheckpointError, Prior
+from dbtool.prior.training.evaluate import evaluate
+from dbtool.prior.training.metrics import chamfer_matrix
 
 SUBSET = ["ball", "star", "table", "ring", "bar", "finger"]
 
@@ -102,7 +102,7 @@ def test_generate_bad_input_is_one_line(tmp_path, args, message):
 
 
 def test_weights_folders_are_versioned():
-    from dbtool.prior.pipeline import DEFAULT_VERSION, weights_dir
+    from dbtool.prior.sampling.pipeline import DEFAULT_VERSION, weights_dir
 
     assert weights_dir(1) == BASE_WEIGHTS.parent or DEFAULT_VERSION != 1
     assert (weights_dir(1) / "base.pt").is_file() and (weights_dir(1) / "eval.json").is_file()
@@ -116,7 +116,7 @@ def test_weights_folders_are_versioned():
 def test_a_version_without_upsampler_says_so(tmp_path, monkeypatch):
     import shutil
 
-    from dbtool.prior import pipeline
+    from dbtool.prior.sampling import pipeline
 
     (tmp_path / "v7").mkdir()
     shutil.copy(pipeline.weights_dir(1) / "base.pt", tmp_path / "v7" / "base.pt")
@@ -127,7 +127,7 @@ def test_a_version_without_upsampler_says_so(tmp_path, monkeypatch):
 
 
 def test_a_far_prompt_names_the_nearest_known_captions():
-    from dbtool.prior.generate import KNOWN, far_prompt_note, nearest_captions
+    from dbtool.prior.sampling.generate import KNOWN, far_prompt_note, nearest_captions
 
     assert far_prompt_note("a star") is None  # a training caption
     near = nearest_captions("a teapot")
@@ -139,7 +139,7 @@ def test_a_far_prompt_names_the_nearest_known_captions():
 def test_generate_with_another_version_notes_that_versions_captions(tmp_path):
     """``--prior 2`` samples version 2 (base and upsampler) and a far prompt's note names
     version 2's captions, not version 1's."""
-    from dbtool.prior.generate import nearest_captions
+    from dbtool.prior.sampling.generate import nearest_captions
 
     near = nearest_captions("a teapot with a long spout", 1, version=2)[0][0]
     assert near not in {c for c, _ in nearest_captions("a teapot with a long spout", 50)}
@@ -155,7 +155,7 @@ def test_an_interrupted_evaluation_resumes_to_the_same_numbers(prior, tmp_path):
     gives the numbers of an uninterrupted run; another key is refused."""
     import json
 
-    from dbtool.prior.evaluate import Parts, weights_digest
+    from dbtool.prior.training.evaluate import Parts, weights_digest
 
     kw = dict(families=["ball", "bar"], reference_families=["ball", "bar", "ring"], samples=2,
               steps=2, log=None, heldout_per_family=2, metric_points=64,

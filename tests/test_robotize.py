@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from dbtool.prior.diffusion import noise_std
-from dbtool.prior.shapes import make_shape
+from dbtool.prior.corpora.shapes import make_shape
+from dbtool.prior.sampling.diffusion import noise_std
 from dbtool.robotize.quality import iou, mesh_inside, noisy
 from dbtool.robotize.robotizer import (
     RobotizeConfig,

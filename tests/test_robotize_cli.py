@@ -8,7 +8,7 @@ from cli_inprocess import run_cli
 
 from dbtool.design import Design
 from dbtool.pointcloud import save_ply
-from dbtool.prior.shapes import make_shape
+from dbtool.prior.corpora.shapes import make_shape
 from dbtool.robotize.quality import noisy
 
 

@@ -10,7 +10,7 @@ difference reproduces. Relative errors are printed (-s).
 import numpy as np
 import pytest
 
-from dbtool.prior.shapes import make_shape
+from dbtool.prior.corpora.shapes import make_shape
 from dbtool.robotize.cloud_metric import evaluate
 from dbtool.robotize.robotizer import robotize
 from dbtool.sim.tasks import get_task

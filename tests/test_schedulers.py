@@ -1,18 +1,19 @@
-"""Noise schedules and samplers: schedule identities, one shared check per sampler family,
-the denoising loop, and the samplers a Prior takes."""
+"""Noise schedules and schedulers: schedule identities, one shared check per scheduler family,
+the denoising loop, the schedulers a Prior takes, and the schedules stored with the weights."""
 
 import numpy as np
 import pytest
 import torch
 
-from dbtool.prior.diffusion import SCALE, denoise, noise_std
-from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
-from dbtool.prior.pipeline import Prior
-from dbtool.prior.schedulers import (
+from dbtool.prior.sampling.diffusion import SCALE, denoise, noise_std
+from dbtool.prior.sampling.model import ModelConfig, PointDiffusionTransformer
+from dbtool.prior.sampling.pipeline import Prior
+from dbtool.prior.sampling.schedulers import (
     DDIMScheduler,
     DDPMScheduler,
     NoiseSchedule,
     Scheduler,
+    schedule_for,
     scheduler_for,
 )
 
@@ -62,6 +63,34 @@ def test_add_noise_statistics():
         assert torch.allclose(xt.std(0), (1 - a).sqrt().expand(1, 3), rtol=0.03)
 
 
+def test_the_shipped_weights_store_the_schedules_they_were_trained_with():
+    from dbtool.prior.sampling.pipeline import weights_config, weights_dir
+
+    for version in (1, 2):
+        saved = weights_config(weights_dir(version))["schedules"]
+        for kind in ("base", "upsampler"):
+            assert saved[kind] == schedule_for(kind).config()
+            rebuilt = NoiseSchedule.from_config(saved[kind])
+            assert torch.equal(rebuilt.abar, schedule_for(kind).abar)
+            assert torch.equal(rebuilt.betas, schedule_for(kind).betas)
+    prior = Prior.load(version=2)
+    assert prior.scheduler.schedule.config() == schedule_for("base").config()
+    assert prior.up_scheduler.schedule.config() == schedule_for("upsampler").config()
+    with pytest.raises(ValueError, match="not a noise schedule"):
+        NoiseSchedule.from_config({"kind": "cosine", "steps": 3})
+
+
+def test_add_noise_numpy_is_add_noise_in_float64():
+    d = schedule_for("base")
+    rng = np.random.default_rng(0)
+    x0, eps = rng.standard_normal((2, 50, 3)), rng.standard_normal((2, 50, 3))
+    for t in (0, 400, 1023):
+        got = d.add_noise_numpy(x0, eps, t)
+        assert got.dtype == np.float64
+        want = d.add_noise(torch.from_numpy(x0), torch.from_numpy(eps), t).numpy()
+        assert np.allclose(got, want, atol=1e-6)
+
+
 def test_noise_std_is_sigma_in_the_prior_frame():
     lin = NoiseSchedule.linear()
     for t in (0, 300, 1023):
@@ -69,7 +98,7 @@ def test_noise_std_is_sigma_in_the_prior_frame():
         assert noise_std(t, lin) == lin.sigma(t) / SCALE
 
 
-# ---------------------------------------------------------------------------- samplers
+# ---------------------------------------------------------------------------- schedulers
 FAMILIES = {
     "ddpm": lambda s: DDPMScheduler(s),
     "ddim": lambda s: DDIMScheduler(s),
@@ -79,8 +108,8 @@ FAMILIES = {
 
 @pytest.mark.parametrize("kind", ["cosine", "linear"])
 @pytest.mark.parametrize("family", list(FAMILIES))
-def test_every_sampler_keeps_the_forward_marginals(family, kind):
-    """The shared check of a sampler family: one interface over the schedule, and an update
+def test_every_scheduler_keeps_the_forward_marginals(family, kind):
+    """The shared check of a scheduler family: one interface over the schedule, and an update
     with the true noise moves q(x_t | x_0) to q(x_t' | x_0) (mean sqrt(abar_t') x_0, std
     sqrt(1 - abar_t')), with ``eta`` times the strided posterior's std as its own noise."""
     schedule = NoiseSchedule(kind)
@@ -120,7 +149,7 @@ def test_every_sampler_keeps_the_forward_marginals(family, kind):
     assert torch.equal(a1, a2)
 
 
-def test_the_eta_number_names_a_sampler():
+def test_the_eta_number_names_a_scheduler():
     s = NoiseSchedule.linear()
     assert type(scheduler_for(1.0)) is DDPMScheduler and scheduler_for(1.0).eta == 1.0
     ddim = scheduler_for(0.3, s)

@@ -25,7 +25,7 @@ def prior_train(
                                   "compiler; about 2 min to compile, then faster steps)"),
 ) -> None:
     """Train a model of the prior on the procedural corpus; checkpoints and resumes."""
-    from dbtool.prior.train import preset, resumed_config, train
+    from dbtool.prior.training.train import preset, resumed_config, train
     from dbtool.runs import RUNS
 
     out = out or RUNS / "prior" / kind
@@ -48,7 +48,7 @@ def prior_export(
     out: Path = typer.Option(..., "-o", "--out", help="weights file to write"),
 ) -> None:
     """Write a training run's EMA weights as a shippable weights file."""
-    from dbtool.prior.train import export_weights
+    from dbtool.prior.training.train import export_weights
 
     with guarded():
         path = export_weights(run_dir / "checkpoint.pt", out)
@@ -71,8 +71,8 @@ def prior_evaluate(
     """Prompt fidelity (1-NN Chamfer), its ceiling, paraphrases, diversity, interpolation;
     on corpus 2 also held-out phrasings, attribute control and part counts. Finished pieces
     are kept in OUT's ``.parts.json``: an interrupted evaluation resumes there."""
-    from dbtool.prior.evaluate import Parts, evaluate, weights_digest
-    from dbtool.prior.pipeline import Prior
+    from dbtool.prior.sampling.pipeline import Prior
+    from dbtool.prior.training.evaluate import Parts, evaluate, weights_digest
     from dbtool.runs import write_json
 
     with guarded():

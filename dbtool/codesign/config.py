@@ -126,7 +126,7 @@ def drift_budget(cfg: CodesignConfig) -> float:
     """``sum over stops of K * beta_t``: how far the Langevin steps of ``cfg`` can move x_t
     in all (per unit drift). ``quick`` takes fewer, longer steps with the same budget as the
     paper's schedule, via ``step_scale``."""
-    from dbtool.prior.schedulers import NoiseSchedule
+    from dbtool.prior.sampling.schedulers import schedule_for
 
-    betas = NoiseSchedule.cosine().betas
+    betas = schedule_for("base").betas
     return cfg.K * float(sum(betas[t] for t in range(cfg.t_max, cfg.t_min - 1, -cfg.dt)))

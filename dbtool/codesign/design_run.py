@@ -38,6 +38,7 @@ from dbtool.codesign.config import (
 )
 from dbtool.codesign.embedding import EmbeddingOptimiser, score
 from dbtool.codesign.langevin import codesign_sample
+from dbtool.prior.sampling.text import null
 from dbtool.sim.tasks import N_STEPS, Task, get_task
 
 FORMAT = "dbtool.run/1"
@@ -142,11 +143,11 @@ class DesignRun:
         self.task = get_task(settings.task)
         self.emb_cfg, self.cod_cfg = settings.configs()
         if prior is None:
-            from dbtool.prior.pipeline import Prior
+            from dbtool.prior.sampling.pipeline import Prior
 
             prior = Prior.load()
         self.prior = prior
-        start = prior.embed(settings.start) if settings.start else torch.zeros(1, 384)
+        start = prior.embed(settings.start) if settings.start else null()
         self.opt = EmbeddingOptimiser(prior, self.task, self.emb_cfg, start, seed=settings.seed,
                                       n_steps=settings.n_steps)
         self.state = State()

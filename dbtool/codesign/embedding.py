@@ -89,9 +89,9 @@ def caption_atoms(corpus: int = 1) -> tuple[tuple[str, ...], torch.Tensor]:
     """One caption per family of corpus ``corpus`` ("a ball", "a star", ..., on the attribute
     corpus "a block with four legs") and their embeddings: the conditions the prior was
     trained on (its family prompts, docs/prior.md)."""
-    from dbtool.prior.training.evaluate import prompt_of
+    from dbtool.prior.corpora.versions import corpus_module
     from dbtool.prior.sampling.text import encode
-    from dbtool.prior.training.train import corpus_module
+    from dbtool.prior.training.evaluate import prompt_of
 
     if corpus == 1:
         from dbtool.prior.corpora.shapes import FAMILIES, make_shape

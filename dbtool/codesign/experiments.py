@@ -196,8 +196,8 @@ def textwindow_run(prior, task: str, c: torch.Tensor | None, seed: int, variant:
     """``n`` designs of the plain composed sampler (guidance 3 on ``c``, 32 steps, sampler
     seed 100 + seed), plus the task's prompt as ``variant`` says (``none`` or
     ``WEIGHT@T_MIN``): metric and Chamfer distance to the prompt's family."""
-    from dbtool.prior.diffusion import SCALE
-    from dbtool.prior.metrics import chamfer_to_family
+    from dbtool.prior.sampling.diffusion import SCALE
+    from dbtool.prior.training.metrics import chamfer_to_family
 
     prompt, family = TEXT_PAIRS[task]
     conds: list[tuple] = [(NULL if c is None else c, 3.0)]

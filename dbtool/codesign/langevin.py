@@ -26,7 +26,8 @@ per-point vectors and ``rho`` is Table 5's renorm scale. Performance R is ascend
 and ``-log p`` descended (``+s``). The controller phi is the per-step actuation sequence,
 initialised from the task's prescribed controller. ``abar_t``, ``beta_t``, the score's
 ``sqrt(1 - abar_t)`` and the x0-estimate come from the prior's sampler
-(:class:`~dbtool.prior.schedulers.Scheduler`), which also takes the ordinary steps between stops.
+(:class:`~dbtool.prior.sampling.schedulers.Scheduler`), which also takes the ordinary steps
+between stops.
 
 dbtool's defaults depart from the fixed step above (docs/method.md §5, measured in
 docs/codesign.md): ``g`` is the gradient of the robot that is scored (``gradient="scored"``:
@@ -52,8 +53,8 @@ import torch
 
 from dbtool.codesign.config import CodesignConfig
 from dbtool.codesign.embedding import score
-from dbtool.prior.diffusion import SCALE, guided_eps, noise_std
-from dbtool.prior.schedulers import Scheduler
+from dbtool.prior.sampling.diffusion import SCALE, guided_eps, noise_std
+from dbtool.prior.sampling.schedulers import Scheduler
 from dbtool.robotize import RobotizeError, evaluate_full
 from dbtool.sim.simulator import SimulationError
 from dbtool.sim.tasks import N_STEPS, Task

@@ -19,9 +19,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
-import torch
 
 from dbtool.compare.budget import GRAD_COST, Budget, gradient_iterations
+from dbtool.prior.sampling.text import null
 from dbtool.sim.robot import Robot
 from dbtool.sim.tasks import Task
 
@@ -36,7 +36,7 @@ _PRIOR: dict[str, object] = {}
 def load_prior():
     """The shipped prior, loaded once per process (each worker keeps its own)."""
     if "prior" not in _PRIOR:
-        from dbtool.prior.pipeline import Prior
+        from dbtool.prior.sampling.pipeline import Prior
 
         _PRIOR["prior"] = Prior.load()
     return _PRIOR["prior"]
@@ -114,7 +114,7 @@ def _prior_samples(task: Task, budget: Budget, seed: int, log) -> Outcome:
     prior = load_prior()
     emb, _ = preset("quick", task.name)
     emb = replace(emb, sample_steps=budget.sample_steps)
-    opt = EmbeddingOptimiser(prior, task, emb, torch.zeros(1, 384), seed=seed,
+    opt = EmbeddingOptimiser(prior, task, emb, null(), seed=seed,
                              n_steps=budget.n_steps)
     n = max(1, budget.units - 1)
     clouds, _ = opt.sample(n, seed=seed * 100_003)
@@ -196,7 +196,7 @@ def _diffusebot(task: Task, budget: Budget, seed: int, log) -> Outcome:
 
     prior = load_prior()
     emb, cod, plan = diffusebot_configs(task.name, budget)
-    opt = EmbeddingOptimiser(prior, task, emb, torch.zeros(1, 384), seed=seed,
+    opt = EmbeddingOptimiser(prior, task, emb, null(), seed=seed,
                              n_steps=budget.n_steps)
     for _ in range(emb.epochs):
         row = opt.step()

@@ -2,7 +2,8 @@
 
 ``robotize(x, task)`` is the robotizer Psi; ``evaluate(x, task, controller)`` adds the
 simulator and returns ``(metric, d metric / d x)``. The robotizer is given the noise level
-of a noisy cloud; ``dbtool.prior.diffusion.noise_std(t)`` is that of a diffusion sample x_t.
+of a noisy cloud; ``dbtool.prior.sampling.diffusion.noise_std(t)`` is that of a diffusion
+sample x_t.
 See ``docs/robotize.md``.
 """
 

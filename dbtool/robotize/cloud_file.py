@@ -8,7 +8,7 @@ from pathlib import Path
 
 from dbtool.design import Design
 from dbtool.pointcloud import load_ply
-from dbtool.prior.diffusion import T_TRAIN, noise_std
+from dbtool.prior.sampling.diffusion import T_TRAIN, noise_std
 from dbtool.robotize.robotizer import RobotizeConfig, RobotizeError, robotize
 from dbtool.sim.tasks import get_task
 from dbtool.viz.robot import robot_figure

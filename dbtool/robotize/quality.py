@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from dbtool.prior.diffusion import SCALE
-from dbtool.prior.schedulers import NoiseSchedule
+from dbtool.prior.sampling.diffusion import SCALE
+from dbtool.prior.sampling.schedulers import NoiseSchedule, schedule_for
 
 
 def iou(a: np.ndarray, b: np.ndarray) -> float:
@@ -44,6 +44,5 @@ def noisy(x0: np.ndarray, t: int, seed: int = 0, schedule: NoiseSchedule | None 
     """A diffusion-like intermediate sample ``x_t = sqrt(abar_t) x_0 + sqrt(1 - abar_t) eps``,
     computed in the prior's model space (clouds scaled by ``SCALE``) and mapped back
     (``schedule``: default the base model's cosine schedule)."""
-    abar = (schedule or NoiseSchedule.cosine()).alpha_bar(t)
     eps = np.random.default_rng(seed).standard_normal(x0.shape)
-    return (np.sqrt(abar) * x0 * SCALE + np.sqrt(1 - abar) * eps) / SCALE
+    return (schedule or schedule_for("base")).add_noise_numpy(x0 * SCALE, eps, t) / SCALE

@@ -1,8 +1,8 @@
 """The attribute corpus (version 2 of the prior's data; docs/method.md §1).
 
 Every family is parametric and its captions carry the drawn parameters as words
-(:mod:`dbtool.prior.words`): "a tall thick finger with three segments", "a ball with four
-legs". Version 1 (:mod:`dbtool.prior.shapes`, 28 families with a few names each) stays as it
+(:mod:`dbtool.prior.corpora.words`): "a tall thick finger with three segments", "a ball with four
+legs". Version 1 (:mod:`dbtool.prior.corpora.shapes`, 28 families with a few names each) stays as it
 was, so the weights trained on it stay reproducible.
 
 Shape ``i`` of family ``f`` in split ``s`` is deterministic given the seed: its generator is
@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dbtool.prior import bodies, composites
-from dbtool.prior.shapes import SPLITS, Shape, collect, surface_sample
-from dbtool.prior.words import Description, captions
+from dbtool.prior.corpora import bodies, composites
+from dbtool.prior.corpora.shapes import SPLITS, Shape, collect, surface_sample
+from dbtool.prior.corpora.words import Description, captions
 
 VERSION = 2
 CAPTIONS_PER_SHAPE = 12

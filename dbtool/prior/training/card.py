@@ -11,8 +11,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from dbtool.prior import shapes
-from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
+from dbtool.prior.corpora import shapes
+from dbtool.prior.sampling.model import ModelConfig, PointDiffusionTransformer
 
 WHY = """\
 Point-E's point-cloud models are transformers whose tokens are the points (no positional
@@ -125,8 +125,8 @@ def _splits(per: int, families: int, s: dict) -> str:
 
 def _corpus_v2(per: int, s: dict) -> list[str]:
     """The corpus section of a model trained on the attribute corpus."""
-    from dbtool.prior import corpus
-    from dbtool.prior.words import HELDOUT_TEMPLATES, TEMPLATES
+    from dbtool.prior.corpora import corpus
+    from dbtool.prior.corpora.words import HELDOUT_TEMPLATES, TEMPLATES
 
     caps = corpus.make_shape("legged_block", 0, "train", n_points=8).captions
     return [
@@ -194,17 +194,9 @@ def _against_v1(old: dict, new: dict) -> list[str]:
     return out + [""]
 
 
-def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None,
-           old: tuple[dict, dict] | None = None, curve: list[dict] | None = None) -> str:
-    """The card's markdown. ``old``: version 1's evaluation and this model's on version 1's
-    families (the numbers the default switch is decided on); ``curve``: the base model's
-    training log."""
-    s = ev["settings"]
-    metas = {"base": base_meta, **({"upsampler": up_meta} if up_meta else {})}
-    fams = list(ev["families"])
+def _header_and_corpus(base_meta: dict, s: dict, version: int) -> list[str]:
+    """The title, the summary and the corpus section."""
     per = base_meta["train_config"]["per_family"]
-    version = int(s.get("corpus", 1))
-    corpus_flag = f" --corpus {version}" if version != 1 else ""
     caps = shapes.make_shape("star", 0, n_points=8).captions
     out = [
         "# dbtool prior: model card" + (f" (version {version})" if version != 1 else ""), "",
@@ -222,7 +214,15 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None,
         f"a thin/thick adjective) in {len(caps) // 3} templates, e.g. "
         f"{', '.join(repr(c) for c in caps[:6])}.", "",
         _splits(per, len(shapes.FAMILIES), s), ""]
-    out += [
+    return out
+
+
+def _architecture_training_quality(base_meta: dict, metas: dict, ev: dict, bench: dict | None,
+                                   curve: list[dict] | None) -> list[str]:
+    """The architecture, training and quality sections (up to the per-family table)."""
+    s = ev["settings"]
+    fams = list(ev["families"])
+    return [
         "## Architecture", "", WHY.format(precision=(
             f"uses bfloat16 autocast{_bf16_note(bench)}" if base_meta["train_config"].get("bf16")
             else "ran in float32 (bfloat16 autocast pays only on CPUs with native bfloat16 "
@@ -248,37 +248,57 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None,
         f"{ev['min_accuracy']:.2f}); ceiling {ev['ceiling']:.3f}.**", "",
         *_quality_rows(ev), "",
     ]
-    if ev.get("paraphrase_accuracy") is not None:
-        out += ["### Captions unlike the training templates", "",
-                f"Mean accuracy **{ev['paraphrase_accuracy']:.2f}** (correct: nearest reference "
-                "in one of the listed families).", "",
-                "| prompt | counts as | accuracy |", "|---|---|---:|"]
-        out += [f"| {p} | {', '.join(r['families'])} | {r['accuracy']:.2f} |"
-                for p, r in ev["paraphrases"].items()]
-        out.append("")
-    out += _v2_quality(ev)
-    if old is not None:
-        out += _against_v1(*old)
-    if ev.get("interpolations"):
-        out += ["### Interpolation between two prompt embeddings", "",
-                "Spherical interpolation from embedding A to B; share of samples whose nearest "
-                "reference is of family A / family B at each point u of the path.", ""]
-        for it in ev["interpolations"]:
-            path = "  ".join(f"u={r['u']:.2f}: {r['share_a']:.2f}/{r['share_b']:.2f}"
-                             for r in it["path"])
-            grad = (f" (intermediate {it['intermediate']:.2f}, largest jump "
-                    f"{it['largest_jump']:.2f})" if "intermediate" in it else "")
-            out.append(f"- {it['a']} -> {it['b']}: {path}{grad}")
-        out.append("")
-    if bench:
-        out += ["## Speed on this CPU", "", "| model | batch | steps | s / batch | samples / s | "
-                "peak memory (MiB) |", "|---|---:|---:|---:|---:|---:|"]
-        out += [f"| {r['kind']} | {r['batch']} | {r['steps']} | {r['seconds']:.2f} | "
-                f"{r['samples_per_s']:.2f} | {r['peak_mib']:.0f} |" for r in bench["cases"]
-                if r["kind"] != "train"]
-        out += ["", f"From `python benchmarks/prior.py` ({bench['machine']['cpus']} CPUs, "
-                f"torch {bench['machine']['torch']}).", ""]
-    out += [
+
+
+def _paraphrase_section(ev: dict) -> list[str]:
+    """Accuracy on captions unlike the training templates (when measured)."""
+    if ev.get("paraphrase_accuracy") is None:
+        return []
+    out = ["### Captions unlike the training templates", "",
+           f"Mean accuracy **{ev['paraphrase_accuracy']:.2f}** (correct: nearest reference "
+           "in one of the listed families).", "",
+           "| prompt | counts as | accuracy |", "|---|---|---:|"]
+    out += [f"| {p} | {', '.join(r['families'])} | {r['accuracy']:.2f} |"
+            for p, r in ev["paraphrases"].items()]
+    out.append("")
+    return out
+
+
+def _interpolation_section(ev: dict) -> list[str]:
+    """The family shares along each interpolation path (when measured)."""
+    if not ev.get("interpolations"):
+        return []
+    out = ["### Interpolation between two prompt embeddings", "",
+           "Spherical interpolation from embedding A to B; share of samples whose nearest "
+           "reference is of family A / family B at each point u of the path.", ""]
+    for it in ev["interpolations"]:
+        path = "  ".join(f"u={r['u']:.2f}: {r['share_a']:.2f}/{r['share_b']:.2f}"
+                         for r in it["path"])
+        grad = (f" (intermediate {it['intermediate']:.2f}, largest jump "
+                f"{it['largest_jump']:.2f})" if "intermediate" in it else "")
+        out.append(f"- {it['a']} -> {it['b']}: {path}{grad}")
+    out.append("")
+    return out
+
+
+def _speed_section(bench: dict | None) -> list[str]:
+    """Sampling speed from the prior benchmark (when given)."""
+    if not bench:
+        return []
+    out = ["## Speed on this CPU", "", "| model | batch | steps | s / batch | samples / s | "
+           "peak memory (MiB) |", "|---|---:|---:|---:|---:|---:|"]
+    out += [f"| {r['kind']} | {r['batch']} | {r['steps']} | {r['seconds']:.2f} | "
+            f"{r['samples_per_s']:.2f} | {r['peak_mib']:.0f} |" for r in bench["cases"]
+            if r["kind"] != "train"]
+    out += ["", f"From `python benchmarks/prior.py` ({bench['machine']['cpus']} CPUs, "
+            f"torch {bench['machine']['torch']}).", ""]
+    return out
+
+
+def _reproduce_and_limits(ev: dict, version: int) -> list[str]:
+    """The commands that rebuild the weights and the card, and the model's limits."""
+    corpus_flag = f" --corpus {version}" if version != 1 else ""
+    return [
         "## Reproduce", "", "```bash",
         f"dbtool prior train --kind base{corpus_flag}          # --resume continues after an "
         "interruption",
@@ -288,8 +308,8 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None,
         "upsampler.pt",
         f"dbtool prior evaluate{corpus_flag} --out runs/prior/eval.json",
         "python benchmarks/prior.py",
-        f"python -m dbtool.prior.card runs/prior/eval.json --version {version}  # shipped as "
-        f"weights/v{version}/eval.json",
+        f"python -m dbtool.prior.training.card runs/prior/eval.json --version {version}  "
+        f"# shipped as weights/v{version}/eval.json",
         "```", "",
         "## Limits", "",
         *_measured_limits(ev),
@@ -298,6 +318,25 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None,
         "- Orientation is canonical (y up); the model does not produce rotated variants.",
         "- No colour channel (the method ignores colour).", "",
     ]
+
+
+def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None,
+           old: tuple[dict, dict] | None = None, curve: list[dict] | None = None) -> str:
+    """The card's markdown. ``old``: version 1's evaluation and this model's on version 1's
+    families (the numbers the default switch is decided on); ``curve``: the base model's
+    training log."""
+    s = ev["settings"]
+    metas = {"base": base_meta, **({"upsampler": up_meta} if up_meta else {})}
+    version = int(s.get("corpus", 1))
+    out = _header_and_corpus(base_meta, s, version)
+    out += _architecture_training_quality(base_meta, metas, ev, bench, curve)
+    out += _paraphrase_section(ev)
+    out += _v2_quality(ev)
+    if old is not None:
+        out += _against_v1(*old)
+    out += _interpolation_section(ev)
+    out += _speed_section(bench)
+    out += _reproduce_and_limits(ev, version)
     return "\n".join(out)
 
 
@@ -305,7 +344,7 @@ def main(argv: list[str] | None = None) -> None:
     import argparse
     import json
 
-    from dbtool.prior.pipeline import load_model, weights_dir
+    from dbtool.prior.sampling.pipeline import load_model, weights_dir
 
     p = argparse.ArgumentParser(description="Render MODEL_CARD.md from measured files.")
     p.add_argument("eval", type=Path, help="JSON written by `dbtool prior evaluate`")
@@ -313,13 +352,13 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--old", type=Path, nargs=2, metavar=("V1_EVAL", "THIS_ON_V1"),
                    help="version 1's evaluation and this model's on corpus 1")
     p.add_argument("--bench", type=Path,
-                   default=Path(__file__).parents[2] / "benchmarks/results/legacy/prior.json")
+                   default=Path(__file__).parents[3] / "benchmarks/results/legacy/prior.json")
     p.add_argument("--log", type=Path, help="the base run's metrics.jsonl (training curve)")
     p.add_argument("--out", type=Path, help="default: MODEL_CARD.md (version 1) or "
                    "weights/vN/MODEL_CARD.md")
     a = p.parse_args(argv)
     folder = weights_dir(a.version)
-    out = a.out or (Path(__file__).parent / "MODEL_CARD.md" if a.version == 1
+    out = a.out or (Path(__file__).parents[1] / "MODEL_CARD.md" if a.version == 1
                     else folder / "MODEL_CARD.md")
     _, base = load_model(folder / "base.pt")
     up_path = folder / "upsampler.pt"

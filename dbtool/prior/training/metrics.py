@@ -76,7 +76,7 @@ def spread(clouds: torch.Tensor) -> float:
 def chamfer_to_family(cloud: np.ndarray, family: str, n: int = 8) -> float:
     """Chamfer distance from ``cloud`` (N, 3) to the nearest of ``n`` training shapes of a
     corpus family (the text-feedback measure of docs/method.md §6)."""
-    from dbtool.prior.shapes import make_shape
+    from dbtool.prior.corpora.shapes import make_shape
 
     refs = np.stack([make_shape(family, i, "train", 0, 1024).points for i in range(n)])
     d = chamfer_matrix(torch.as_tensor(np.asarray(cloud)[None], dtype=torch.float32),

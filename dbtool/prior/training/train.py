@@ -27,15 +27,16 @@ import numpy as np
 import torch
 
 from dbtool.atomic import atomic_write, atomic_write_text
+from dbtool.errors import InputError, MissingFileError, PathError
 from dbtool.precision import use_bf16
-from dbtool.prior import shapes, text
-from dbtool.prior.diffusion import SCALE, diffusion_loss
-from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
-from dbtool.prior.schedulers import NoiseSchedule
+from dbtool.prior.corpora.versions import CORPORA, corpus_digest, corpus_module
+from dbtool.prior.sampling import text
+from dbtool.prior.sampling.diffusion import P_UNCOND, SCALE, diffusion_loss
+from dbtool.prior.sampling.model import ModelConfig, PointDiffusionTransformer
+from dbtool.prior.sampling.schedulers import NoiseSchedule, schedule_for
 
 COARSE = 1024
 FINE = 4096
-CORPORA = (1, 2)
 
 
 @dataclass
@@ -52,7 +53,7 @@ class TrainConfig:
     weight_decay: float = 0.01
     ema: float = 0.999
     per_family: int = 300  # training shapes per family
-    corpus: int = 1  # 1: dbtool/prior/shapes.py (the shipped weights), 2: prior/corpus.py
+    corpus: int = 1  # 1: prior/corpora/shapes.py (the shipped weights), 2: prior/corpora/corpus.py
     corpus_digest: str = ""  # hash of the corpus the run started with (set by train)
     seed: int = 0
     threads: int = 1
@@ -64,35 +65,13 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         if self.kind not in ("base", "upsampler"):
-            raise ValueError(f"unknown model kind {self.kind!r}: base or upsampler")
+            raise InputError(f"unknown model kind {self.kind!r}: base or upsampler")
         if isinstance(self.model, dict):
             self.model = ModelConfig(**self.model)
         self.model.coarse = self.kind == "upsampler"
         if self.corpus not in CORPORA:
-            raise ValueError(f"unknown corpus version {self.corpus}: "
+            raise InputError(f"unknown corpus version {self.corpus}: "
                              f"{' or '.join(map(str, CORPORA))}")
-
-
-def corpus_module(version: int):
-    """The module that builds corpus ``version`` (``FAMILIES``, ``make_corpus``)."""
-    from dbtool.prior import corpus
-
-    return {1: shapes, 2: corpus}[version]
-
-
-def corpus_digest(mod) -> str:
-    """A short hash of what a corpus module builds (the first two training shapes of every
-    family at 64 points, and their captions): a cached corpus is rebuilt, and a training run
-    refuses to resume, when the corpus itself changes, not when its code is only
-    refactored."""
-    h = hashlib.sha256()
-    for f in mod.FAMILIES:
-        for i in range(2):
-            s = mod.make_shape(f, i, "train", 0, 64)
-            h.update(f.encode())
-            h.update(s.points.tobytes())
-            h.update("\n".join(s.captions).encode())
-    return h.hexdigest()[:10]
 
 
 def preset(kind: str, **overrides) -> TrainConfig:
@@ -105,7 +84,7 @@ def preset(kind: str, **overrides) -> TrainConfig:
     elif kind == "upsampler":
         cfg = TrainConfig(kind="upsampler", steps=4000, batch=16, subset=256, ckpt_every=250)
     else:
-        raise ValueError(f"unknown model kind {kind!r}: base or upsampler")
+        raise InputError(f"unknown model kind {kind!r}: base or upsampler")
     for key, value in overrides.items():
         if value is not None:
             setattr(cfg, key, value)
@@ -116,11 +95,11 @@ def resumed_config(run_dir: Path, steps: int | None = None) -> TrainConfig:
     """The configuration saved in ``run_dir/checkpoint.pt`` (optionally with more steps)."""
     ckpt_path = Path(run_dir) / "checkpoint.pt"
     if not ckpt_path.is_file():
-        raise FileNotFoundError(f"nothing to resume: {ckpt_path} does not exist")
+        raise MissingFileError(f"nothing to resume: {ckpt_path} does not exist")
     try:
         saved = torch.load(ckpt_path, weights_only=True, map_location="cpu")["config"]
     except Exception as exc:  # noqa: BLE001 - any unreadable checkpoint gets one message
-        raise ValueError(f"not a readable training checkpoint: {ckpt_path}") from exc
+        raise InputError(f"not a readable training checkpoint: {ckpt_path}") from exc
     cfg = TrainConfig(**saved)
     if steps is not None:
         cfg.steps = steps
@@ -204,9 +183,85 @@ def make_batch(cfg: TrainConfig, clouds, cap_index, cap_count, emb, rng: np.rand
     return torch.from_numpy(x0 * SCALE), cond, coarse
 
 
-def schedule_for(kind: str) -> NoiseSchedule:
-    """The noise schedule a model of ``kind`` is trained with (cosine base, linear upsampler)."""
-    return NoiseSchedule("cosine" if kind == "base" else "linear")
+class RunExistsError(PathError, FileExistsError):
+    """A training run would overwrite another run's checkpoint."""
+
+
+@dataclass
+class TrainState:
+    """What a training run carries from step to step (and saves in ``checkpoint.pt``)."""
+
+    model: PointDiffusionTransformer
+    ema: PointDiffusionTransformer
+    opt: torch.optim.Optimizer
+    rng: np.random.Generator
+    gen: torch.Generator
+    start: int = 0
+    elapsed: float = 0.0
+
+
+def check_corpus(cfg: TrainConfig, run_dir: Path) -> None:
+    """Record the corpus's hash in ``cfg``; refuse to resume a run on a changed corpus."""
+    digest = corpus_digest(corpus_module(cfg.corpus))
+    if cfg.corpus_digest and cfg.corpus_digest != digest:
+        raise InputError(f"the corpus changed since {run_dir} started (corpus "
+                         f"{cfg.corpus_digest}, now {digest}); a resumed run would train on "
+                         "other shapes: start a new run")
+    cfg.corpus_digest = digest  # kept in the checkpoint's config
+
+
+def initial_state(cfg: TrainConfig, ckpt_path: Path, run_dir: Path) -> TrainState:
+    """A fresh model, EMA copy, optimiser and RNGs (seeded), or those of ``ckpt_path``."""
+    torch.manual_seed(cfg.seed)
+    model = PointDiffusionTransformer(cfg.model)
+    ema = copy.deepcopy(model).requires_grad_(False)
+    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    state = TrainState(model, ema, opt, np.random.default_rng(cfg.seed),
+                       torch.Generator().manual_seed(cfg.seed))
+    if ckpt_path.exists():
+        ck = torch.load(ckpt_path, weights_only=True)
+        model.load_state_dict(ck["model"])
+        ema.load_state_dict(ck["ema"])
+        opt.load_state_dict(ck["opt"])
+        state.rng.bit_generator.state = ck["rng"]
+        state.gen.set_state(ck["gen"])
+        state.start, state.elapsed = ck["step"], ck["elapsed"]
+        if cfg.steps < state.start:
+            raise InputError(f"{run_dir} is already at step {state.start}; --steps {cfg.steps} "
+                             "would go back")
+    return state
+
+
+def save_state(state: TrainState, cfg: TrainConfig, step: int, ckpt_path: Path) -> None:
+    atomic_save({"model": state.model.state_dict(), "ema": state.ema.state_dict(),
+                 "opt": state.opt.state_dict(), "rng": state.rng.bit_generator.state,
+                 "gen": state.gen.get_state(), "step": step, "elapsed": state.elapsed,
+                 "config": asdict(cfg)}, ckpt_path)
+
+
+def train_step(cfg: TrainConfig, state: TrainState, fwd, schedule: NoiseSchedule, step: int,
+               data: tuple) -> float:
+    """One optimiser step (learning rate, batch, loss, clipped update, EMA); the loss."""
+    model, opt = state.model, state.opt
+    for g in opt.param_groups:
+        g["lr"] = lr_at(cfg, step)
+    x0, cond, coarse = make_batch(cfg, *data, state.rng)
+
+    def net(x, t, c, coarse=coarse):
+        return fwd(x, t, c, coarse)
+
+    with torch.autocast("cpu", dtype=torch.bfloat16, enabled=use_bf16("cpu", cfg.bf16)):
+        loss = diffusion_loss(schedule, net, x0, cond, state.gen,
+                              p_uncond=P_UNCOND if cfg.kind == "base" else 0.0)
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+    opt.step()
+    decay = min(cfg.ema, (1 + step) / (10 + step))
+    with torch.no_grad():
+        for pe, pm in zip(state.ema.parameters(), model.parameters(), strict=True):
+            pe.lerp_(pm, 1 - decay)
+    return loss.item()
 
 
 def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path | None = None,
@@ -218,50 +273,22 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path
     torch.set_num_threads(max(1, cfg.threads))
     ckpt_path = Path(run_dir) / "checkpoint.pt"
     if ckpt_path.exists() and not resume:
-        raise FileExistsError(f"{ckpt_path} exists: pass --resume or choose another --out")
-    digest = corpus_digest(corpus_module(cfg.corpus))
-    if cfg.corpus_digest and cfg.corpus_digest != digest:
-        raise ValueError(f"the corpus changed since {run_dir} started (corpus "
-                         f"{cfg.corpus_digest}, now {digest}); a resumed run would train on "
-                         "other shapes: start a new run")
-    cfg.corpus_digest = digest  # kept in the checkpoint's config
+        raise RunExistsError(f"{ckpt_path} exists: pass --resume or choose another --out")
+    check_corpus(cfg, run_dir)
     run = RunDir(run_dir, asdict(cfg), cfg.seed, "cpu")
     clouds, _labels, table, cap_index, cap_count = load_corpus(
         cfg, cache_dir or run.path.parent / "corpus")
     emb = caption_embeddings(cfg, table, cache_dir or run.path.parent / "corpus") \
         if cfg.kind == "base" else None
-
-    torch.manual_seed(cfg.seed)
-    model = PointDiffusionTransformer(cfg.model)
-    ema = copy.deepcopy(model).requires_grad_(False)
-    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-    rng = np.random.default_rng(cfg.seed)
-    gen = torch.Generator().manual_seed(cfg.seed)
-    start, elapsed = 0, 0.0
-    if ckpt_path.exists():
-        ck = torch.load(ckpt_path, weights_only=True)
-        model.load_state_dict(ck["model"])
-        ema.load_state_dict(ck["ema"])
-        opt.load_state_dict(ck["opt"])
-        rng.bit_generator.state = ck["rng"]
-        gen.set_state(ck["gen"])
-        start, elapsed = ck["step"], ck["elapsed"]
-        if cfg.steps < start:
-            raise ValueError(f"{run_dir} is already at step {start}; --steps {cfg.steps} "
-                             "would go back")
+    state = initial_state(cfg, ckpt_path, run_dir)
+    start = state.start
     # compiled: fused kernels for the forward and backward (the weights stay ``model``'s)
-    fwd = torch.compile(model) if cfg.compile else model
+    fwd = torch.compile(state.model) if cfg.compile else state.model
     # the loss log holds exactly the steps the checkpoint has seen (a crash after the last
     # checkpoint leaves rows that the resumed run will write again)
     kept = [r for r in read_log(run.path) if r.get("step", 0) <= start]
     atomic_write_text(run.path / "metrics.jsonl", "".join(json.dumps(r) + "\n" for r in kept))
     schedule = schedule_for(cfg.kind)
-
-    def save(step: int) -> None:
-        atomic_save({"model": model.state_dict(), "ema": ema.state_dict(),
-                     "opt": opt.state_dict(), "rng": rng.bit_generator.state,
-                     "gen": gen.get_state(), "step": step, "elapsed": elapsed,
-                     "config": asdict(cfg)}, ckpt_path)
 
     bar = None
     if show_progress:
@@ -272,42 +299,25 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path
     t0 = time.perf_counter()
     step = start
     for step in range(start, cfg.steps):
-        for g in opt.param_groups:
-            g["lr"] = lr_at(cfg, step)
-        x0, cond, coarse = make_batch(cfg, clouds, cap_index, cap_count, emb, rng)
-
-        def net(x, t, c, coarse=coarse):
-            return fwd(x, t, c, coarse)
-
-        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=use_bf16("cpu", cfg.bf16)):
-            loss = diffusion_loss(schedule, net, x0, cond, gen,
-                                  p_uncond=0.1 if cfg.kind == "base" else 0.0)
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
-        opt.step()
-        decay = min(cfg.ema, (1 + step) / (10 + step))
-        with torch.no_grad():
-            for pe, pm in zip(ema.parameters(), model.parameters(), strict=True):
-                pe.lerp_(pm, 1 - decay)
-        window.append(loss.item())
+        window.append(train_step(cfg, state, fwd, schedule, step,
+                                 (clouds, cap_index, cap_count, emb)))
         if bar is not None:
             bar.update(1)
             bar.set_postfix(loss=f"{np.mean(window[-50:]):.4f}")
         if (step + 1) % cfg.log_every == 0:
             now = time.perf_counter()
-            elapsed += now - t0
+            state.elapsed += now - t0
             t0 = now
             run.log(step=step + 1, loss=float(np.mean(window)), lr=lr_at(cfg, step),
-                    elapsed_s=round(elapsed, 1))
+                    elapsed_s=round(state.elapsed, 1))
             window = []
         if (step + 1) % cfg.ckpt_every == 0:
-            save(step + 1)
-    elapsed += time.perf_counter() - t0
-    save(cfg.steps)
+            save_state(state, cfg, step + 1, ckpt_path)
+    state.elapsed += time.perf_counter() - t0
+    save_state(state, cfg, cfg.steps, ckpt_path)
     if bar is not None:
         bar.close()
-    result = {"steps": cfg.steps, "elapsed_s": elapsed}
+    result = {"steps": cfg.steps, "elapsed_s": state.elapsed}
     write_json(run.path / "metrics.json", result)
     return result
 
@@ -315,13 +325,13 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path
 def export_weights(checkpoint: Path, out: Path) -> Path:
     """Write the EMA weights and the model config of a checkpoint as a shippable file."""
     if not Path(checkpoint).is_file():
-        raise ValueError(f"checkpoint not found: {checkpoint}")
+        raise MissingFileError(f"checkpoint not found: {checkpoint}")
     try:
         ck = torch.load(checkpoint, weights_only=True, map_location="cpu")
         cfg = ck["config"]
         ck["ema"], ck["step"], ck["elapsed"]  # noqa: B018 - the fields a weights file needs
     except Exception as exc:  # noqa: BLE001 - any unreadable checkpoint gets one message
-        raise ValueError(f"not a dbtool training checkpoint: {checkpoint}") from exc
+        raise InputError(f"not a dbtool training checkpoint: {checkpoint}") from exc
     state = {k: v.to(torch.float32) for k, v in ck["ema"].items()}
     log = read_log(checkpoint.parent)
     tail = [r["loss"] for r in log[-20:]]  # the last 20 logged windows (500 steps by default)
@@ -329,7 +339,7 @@ def export_weights(checkpoint: Path, out: Path) -> Path:
     atomic_save({"kind": cfg["kind"], "model": cfg["model"], "state": state,
                  "steps": ck["step"], "train_seconds": ck["elapsed"],
                  "final_loss": float(np.mean(tail)) if tail else None,
-                 "train_config": cfg}, out)
+                 "train_config": cfg, "schedule": schedule_for(cfg["kind"]).config()}, out)
     return out
 
 

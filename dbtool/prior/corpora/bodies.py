@@ -1,7 +1,7 @@
 """Single-body families of the attribute corpus (docs/method.md §1).
 
 Each builder draws its parameters from ``rng`` and returns the solid (z-up, any scale: the
-corpus normalises it) and its :class:`~dbtool.prior.words.Description`. A graded attribute's
+corpus normalises it) and its :class:`~dbtool.prior.corpora.words.Description`. A graded attribute's
 ``u`` is the drawn parameter's position in its range, mapped so that a high ``u`` reads as the
 high word ("thick", "tall", "long", ...) of the shape after normalisation.
 """
@@ -13,8 +13,8 @@ import math
 import numpy as np
 from manifold3d import CrossSection, Manifold
 
-from dbtool.prior.solids import ball, box, extrude, polyline, rod, union
-from dbtool.prior.words import Description as D
+from dbtool.prior.corpora.solids import ball, box, extrude, polyline, rod, union
+from dbtool.prior.corpora.words import Description as D
 
 
 def lerp(lo: float, hi: float, u: float) -> float:

@@ -1,9 +1,12 @@
-"""Noise schedules and samplers as objects, in the style of diffusers (docs/method.md §1).
+"""Noise schedules and schedulers as objects, in the style of diffusers (docs/method.md §1).
 
 A :class:`NoiseSchedule` holds ``abar_t`` and ``beta_t`` for ``t = 0 .. T - 1`` (cosine for the
-base model, linear for the upsampler, as Point-E). A sampler (:class:`DDPMScheduler`,
-:class:`DDIMScheduler`) wraps a schedule and adds the strided timestep grid and the update rule;
-both answer the same calls::
+base model, linear for the upsampler, as Point-E). It is the one definition of the prior's
+noise schedule: :func:`schedule_for` gives the schedule a model of each kind trains with, and
+the shipped weights store theirs (``weights/vN/config.json``, :meth:`NoiseSchedule.config`),
+which :meth:`~dbtool.prior.sampling.pipeline.Prior.load` reads back. A scheduler
+(:class:`DDPMScheduler`, :class:`DDIMScheduler`: the step rule) wraps a schedule and adds the
+strided timestep grid and the update rule; both answer the same calls::
 
     ts = sched.timesteps(64)                      # T - 1 ... 0, strided
     x_t = sched.add_noise(x_0, eps, t)            # forward process
@@ -11,22 +14,29 @@ both answer the same calls::
     sched.sigma(t)                                # noise std of x_t, sqrt(1 - abar_t)
     x_prev, x0_hat = sched.step(eps, t, t_prev, x_t, generator)
 
-Everything works in model space (clouds scaled by 2, see :mod:`dbtool.prior.diffusion`).
+Everything works in model space (clouds scaled by 2, see :mod:`dbtool.prior.sampling.diffusion`).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from typing import NamedTuple
 
+import numpy as np
 import torch
+
+from dbtool.errors import InputError
 
 T_TRAIN = 1024
 SCHEDULES = ("cosine", "linear")
+COSINE_S = 0.008  # Nichol & Dhariwal's offset
+LINEAR_BETAS = (1e-4, 0.02)  # DDPM's first and last beta at 1,000 steps
+KINDS = {"base": "cosine", "upsampler": "linear"}  # model kind -> the schedule it trains with
 
 
-def cosine_alphas_cumprod(T: int, s: float = 0.008) -> torch.Tensor:
+def cosine_alphas_cumprod(T: int, s: float = COSINE_S) -> torch.Tensor:
     """Nichol & Dhariwal's cosine schedule: ``abar(t) = f(t) / f(0)``, betas clipped at 0.999."""
     steps = torch.arange(T + 1, dtype=torch.float64)
     f = torch.cos((steps / T + s) / (1 + s) * math.pi / 2) ** 2
@@ -34,10 +44,11 @@ def cosine_alphas_cumprod(T: int, s: float = 0.008) -> torch.Tensor:
     return torch.cumprod(1 - betas, 0)
 
 
-def linear_alphas_cumprod(T: int) -> torch.Tensor:
+def linear_alphas_cumprod(T: int, beta_start: float = LINEAR_BETAS[0],
+                          beta_end: float = LINEAR_BETAS[1]) -> torch.Tensor:
     """DDPM's linear betas from 1e-4 to 0.02, rescaled to ``T`` steps (as Point-E does)."""
     scale = 1000.0 / T
-    betas = torch.linspace(scale * 1e-4, scale * 0.02, T, dtype=torch.float64)
+    betas = torch.linspace(scale * beta_start, scale * beta_end, T, dtype=torch.float64)
     return torch.cumprod(1 - betas, 0)
 
 
@@ -45,13 +56,31 @@ class NoiseSchedule:
     """``abar_t`` (float32 ``abar``) and ``beta_t`` (``betas``) of a variance-preserving
     forward process, and the operations that need nothing else."""
 
-    def __init__(self, kind: str = "cosine", T: int = T_TRAIN) -> None:
+    def __init__(self, kind: str = "cosine", T: int = T_TRAIN, s: float = COSINE_S,
+                 beta_start: float = LINEAR_BETAS[0], beta_end: float = LINEAR_BETAS[1]
+                 ) -> None:
         if kind not in SCHEDULES:
-            raise ValueError(f"unknown schedule {kind!r}; choose one of {', '.join(SCHEDULES)}")
+            raise InputError(f"unknown schedule {kind!r}; choose one of {', '.join(SCHEDULES)}")
         self.kind, self.T = kind, T
-        ab = cosine_alphas_cumprod(T) if kind == "cosine" else linear_alphas_cumprod(T)
+        # the parameters of this kind (``s``: cosine; ``beta_start``, ``beta_end``: linear)
+        self.params = {"s": s} if kind == "cosine" else {"beta_start": beta_start,
+                                                         "beta_end": beta_end}
+        ab = (cosine_alphas_cumprod(T, s) if kind == "cosine"
+              else linear_alphas_cumprod(T, beta_start, beta_end))
         self.abar = ab.float()
         self.betas = (1 - ab / torch.cat([ab.new_ones(1), ab[:-1]])).float()
+
+    def config(self) -> dict:
+        """What the schedule is made from (kind, ``T``, parameters): stored with the weights."""
+        return {"kind": self.kind, "T": self.T, **self.params}
+
+    @classmethod
+    def from_config(cls, config: dict) -> NoiseSchedule:
+        """The schedule :meth:`config` describes."""
+        try:
+            return cls(**config)
+        except TypeError as exc:
+            raise InputError(f"not a noise schedule: {config!r}") from exc
 
     @classmethod
     def cosine(cls, T: int = T_TRAIN) -> NoiseSchedule:
@@ -83,14 +112,30 @@ class NoiseSchedule:
         a = self.abar.to(x0.device)[t].view(-1, *([1] * (x0.dim() - 1)))
         return a.sqrt() * x0 + (1 - a).sqrt() * eps
 
+    def add_noise_numpy(self, x0: np.ndarray, eps: np.ndarray, t: int) -> np.ndarray:
+        """:meth:`add_noise` for one ``t`` on numpy arrays: ``abar_t`` (float32, as stored)
+        widened to a float64 scalar, so float64 clouds stay float64."""
+        abar = self.alpha_bar(t)
+        return np.sqrt(abar) * x0 + np.sqrt(1 - abar) * eps
+
     def predict_x0(self, x: torch.Tensor, t: int, eps: torch.Tensor) -> torch.Tensor:
         """``x0_hat = (x_t - sqrt(1 - abar_t) eps) / sqrt(abar_t)``."""
         a = self.abar[t].to(x.device)
         return (x - (1 - a).sqrt() * eps) / a.sqrt()
 
 
+@functools.cache
+def schedule_for(kind: str) -> NoiseSchedule:
+    """The noise schedule a model of ``kind`` (``"base"``: cosine, ``"upsampler"``: linear)
+    trains with, and the default where no weights say otherwise. One shared object per kind:
+    read it, do not change it."""
+    if kind not in KINDS:
+        raise InputError(f"unknown model kind {kind!r}: {' or '.join(KINDS)}")
+    return NoiseSchedule(KINDS[kind])
+
+
 class StepOutput(NamedTuple):
-    """One sampler update: ``x_prev`` = x at the next timestep (x_0 after the last one) and
+    """One scheduler update: ``x_prev`` = x at the next timestep (x_0 after the last one) and
     ``x0`` = the clipped prediction of x_0 it was built from."""
 
     x_prev: torch.Tensor
@@ -98,14 +143,15 @@ class StepOutput(NamedTuple):
 
 
 class Scheduler:
-    """A sampler on a :class:`NoiseSchedule`: strided timesteps and the DDIM family's update
-    ``x_t -> x_t'`` with stochasticity ``eta`` (0: deterministic DDIM, 1: DDPM's posterior).
+    """A scheduler (the step rule) on a :class:`NoiseSchedule`: strided timesteps and the DDIM
+    family's update ``x_t -> x_t'`` with stochasticity ``eta`` (0: deterministic DDIM, 1:
+    DDPM's posterior).
     ``clip`` bounds the prediction of x_0 (model space; ``None``: no clipping)."""
 
     eta: float = 0.0
 
     def __init__(self, schedule: NoiseSchedule | None = None, clip: float | None = 1.0) -> None:
-        self.schedule = schedule or NoiseSchedule.cosine()
+        self.schedule = schedule or schedule_for("base")
         self.clip = clip
 
     def __repr__(self) -> str:
@@ -115,7 +161,7 @@ class Scheduler:
     def T(self) -> int:
         return self.schedule.T
 
-    # the schedule's operations, so a sampler is the one object callers need
+    # the schedule's operations, so a scheduler is the one object callers need
     def alpha_bar(self, t: int) -> float:
         return self.schedule.alpha_bar(t)
 
@@ -138,7 +184,7 @@ class Scheduler:
         every timestep of ``include`` (where the caller wants control back)."""
         top = self.T - 1 if t_start is None else int(t_start)
         if steps < 1:
-            raise ValueError("at least one sampling step is needed")
+            raise InputError("at least one sampling step is needed")
         grid = {round(top - i * top / max(steps - 1, 1)) for i in range(steps)}
         grid |= {int(t) for t in include if 0 <= t <= top}
         return sorted(grid, reverse=True)
@@ -169,7 +215,7 @@ class DDIMScheduler(Scheduler):
     def __init__(self, schedule: NoiseSchedule | None = None, eta: float = 0.0,
                  clip: float | None = 1.0) -> None:
         if not 0.0 <= eta <= 1.0:
-            raise ValueError(f"eta must be in [0, 1], got {eta}")
+            raise InputError(f"eta must be in [0, 1], got {eta}")
         super().__init__(schedule, clip)
         self.eta = float(eta)
 
@@ -183,5 +229,5 @@ class DDPMScheduler(Scheduler):
 
 
 def scheduler_for(eta: float, schedule: NoiseSchedule | None = None) -> Scheduler:
-    """The sampler a number ``eta`` names: DDPM for 1, DDIM with that ``eta`` otherwise."""
+    """The scheduler a number ``eta`` names: DDPM for 1, DDIM with that ``eta`` otherwise."""
     return DDPMScheduler(schedule) if eta == 1.0 else DDIMScheduler(schedule, eta)

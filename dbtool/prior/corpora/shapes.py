@@ -20,12 +20,12 @@ import numpy as np
 import trimesh
 from manifold3d import CrossSection, Manifold
 
-from dbtool.prior.solids import SEG, normalise, to_trimesh
-from dbtool.prior.solids import ball as _ball
-from dbtool.prior.solids import box as _box
-from dbtool.prior.solids import extrude as _extrude
-from dbtool.prior.solids import rod as _rod
-from dbtool.prior.solids import union as _union
+from dbtool.prior.corpora.solids import SEG, normalise, to_trimesh
+from dbtool.prior.corpora.solids import ball as _ball
+from dbtool.prior.corpora.solids import box as _box
+from dbtool.prior.corpora.solids import extrude as _extrude
+from dbtool.prior.corpora.solids import rod as _rod
+from dbtool.prior.corpora.solids import union as _union
 
 SPLITS = {"train": 0, "reference": 1, "heldout": 2, "test": 3}
 

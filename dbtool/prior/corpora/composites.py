@@ -1,6 +1,6 @@
 """More families of the attribute corpus: hollow and faceted solids, and compositions of a
 body with parts ("a ball with four legs", "a block with two fins"; docs/method.md §1).
-Builders as in :mod:`dbtool.prior.bodies`."""
+Builders as in :mod:`dbtool.prior.corpora.bodies`."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import math
 import numpy as np
 from manifold3d import CrossSection, Manifold
 
-from dbtool.prior.bodies import lerp
-from dbtool.prior.solids import ball, box, extrude, polyline, rod, union
-from dbtool.prior.words import Description as D
+from dbtool.prior.corpora.bodies import lerp
+from dbtool.prior.corpora.solids import ball, box, extrude, polyline, rod, union
+from dbtool.prior.corpora.words import Description as D
 
 
 def fin(rng):

@@ -12,6 +12,8 @@ from functools import lru_cache
 
 import torch
 
+from dbtool.errors import InputError
+
 DIM = 384
 
 
@@ -37,10 +39,10 @@ def encode(prompts: list[str] | str) -> torch.Tensor:
     if isinstance(prompts, str):
         prompts = [prompts]
     if not prompts:
-        raise ValueError("no prompts to encode")
+        raise InputError("no prompts to encode")
     for p in prompts:
         if not isinstance(p, str) or not p.strip():
-            raise ValueError("a prompt must be a non-empty string")
+            raise InputError("a prompt must be a non-empty string")
     todo = [p for p in dict.fromkeys(prompts) if p not in _STORE]
     if todo:
         vecs = _model().encode(todo, convert_to_numpy=True, normalize_embeddings=True,

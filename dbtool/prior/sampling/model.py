@@ -22,7 +22,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from dbtool.prior.diffusion import T_TRAIN
+from dbtool.prior.sampling.diffusion import T_TRAIN
 
 # Inference runs the batch in chunks of about this many point tokens: the (tokens x 4 width)
 # MLP activations then stay in the CPU's cache. Same numbers; with the fused attention below, a

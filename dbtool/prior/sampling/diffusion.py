@@ -1,14 +1,15 @@
 """Gaussian diffusion of point clouds: the model space, training loss, guidance, sampling loop.
 
 Follows Point-E (docs/method.md §1): 1,024 training steps, cosine schedule for the base model
-and linear for the upsampler (:mod:`dbtool.prior.schedulers`), epsilon prediction,
-classifier-free guidance trained by dropping the condition (zero vector) with p = 0.1. Clouds
-live in ``[-0.5, 0.5]^3`` and enter the model scaled by 2 (:data:`SCALE`); everything in this
-module works in model space.
+and linear for the upsampler (:mod:`dbtool.prior.sampling.schedulers`), epsilon prediction,
+classifier-free guidance trained by dropping the condition (the zero vector, ``text.null()``)
+with probability :data:`P_UNCOND` = 0.1. Clouds live in ``[-0.5, 0.5]^3`` and enter the model
+scaled by 2 (:data:`SCALE`); everything in this module works in model space.
 
 Sampling is a generator (:func:`denoise`): it yields a :class:`Step` before each denoising
-update, the caller may read or replace ``step.x`` (the co-design sampler runs its own Langevin
-steps at chosen t, docs/method.md §5) and the generator continues from there.
+update, the caller may read or replace ``step.x`` (co-design runs its own Langevin steps at
+chosen t, docs/method.md §5) and the generator continues from there. The update itself is the
+scheduler's (:mod:`dbtool.prior.sampling.schedulers`).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from dataclasses import dataclass
 
 import torch
 
-from dbtool.prior.schedulers import T_TRAIN, NoiseSchedule, Scheduler
+from dbtool.prior.sampling.schedulers import T_TRAIN, NoiseSchedule, Scheduler, schedule_for
 
 __all__ = ["P_UNCOND", "SCALE", "T_TRAIN", "EpsModel", "Step", "denoise", "diffusion_loss",
            "guided_eps", "noise_std"]
@@ -29,18 +30,12 @@ P_UNCOND = 0.1  # probability of dropping the condition in training
 # eps = model(x_t, t, cond): x (B, N, 3), t (B,) long, cond (B, D)
 EpsModel = Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]
 
-_COSINE: NoiseSchedule | None = None
-
 
 def noise_std(t: int, schedule: NoiseSchedule | Scheduler | None = None) -> float:
     """Std of the noise in x_t in the prior's frame (the model space is scaled by 2): the
     noise level the robotizer is given for a diffusion sample. Default: the base model's
     cosine schedule."""
-    global _COSINE
-    if schedule is None:
-        _COSINE = _COSINE or NoiseSchedule.cosine()
-        schedule = _COSINE
-    return schedule.sigma(t) / SCALE
+    return (schedule or schedule_for("base")).sigma(t) / SCALE
 
 
 def diffusion_loss(schedule: NoiseSchedule | Scheduler, model: EpsModel, x0: torch.Tensor,
@@ -60,7 +55,7 @@ def diffusion_loss(schedule: NoiseSchedule | Scheduler, model: EpsModel, x0: tor
 
 @dataclass
 class Step:
-    """State of a running sampler before the update at timestep ``t`` (``x`` = x_t)."""
+    """State of a running denoising loop before the update at timestep ``t`` (``x`` = x_t)."""
 
     index: int
     t: int

@@ -12,16 +12,24 @@ import hashlib
 import json
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from dbtool.prior import shapes
-from dbtool.prior.metrics import chamfer_matrix, one_nn_accuracy, one_nna, spread, subsample
-from dbtool.prior.pipeline import Prior
-from dbtool.prior.schedulers import scheduler_for
-from dbtool.prior.train import corpus_module
+from dbtool.errors import InputError
+from dbtool.prior.corpora import shapes
+from dbtool.prior.corpora.versions import corpus_module
+from dbtool.prior.sampling.pipeline import Prior
+from dbtool.prior.sampling.schedulers import Scheduler, scheduler_for
+from dbtool.prior.training.metrics import (
+    chamfer_matrix,
+    one_nn_accuracy,
+    one_nna,
+    spread,
+    subsample,
+)
 
 REF_PER_FAMILY = 32
 HELDOUT_PER_FAMILY = 16
@@ -61,7 +69,7 @@ class Parts:
         if path is not None and path.is_file():
             saved = json.loads(path.read_text())
             if saved.get("key") != key:
-                raise ValueError(f"{path} holds an evaluation with other settings or weights: "
+                raise InputError(f"{path} holds an evaluation with other settings or weights: "
                                  "delete it or choose another --out")
             self.done = saved["parts"]
         self.loaded = len(self.done)
@@ -113,7 +121,7 @@ def prompt_of(family: str, version: int = 1) -> str:
     first noun, with the part count of shape 0 where another family has the same noun
     (``"a block with four legs"``)."""
     if version != 1:
-        from dbtool.prior.words import count_phrase, noun_phrase
+        from dbtool.prior.corpora.words import count_phrase, noun_phrase
 
         d = descriptions(version)[family]
         shared = sum(o.nouns[0] == d.nouns[0] for o in descriptions(version).values()) > 1
@@ -122,6 +130,97 @@ def prompt_of(family: str, version: int = 1) -> str:
     for adjective in ("thin ", "thick "):
         name = name.replace(adjective, "")
     return shapes.captions([name.split(" ", 1)[1]])[0]
+
+
+@dataclass
+class EvalRun:
+    """What every piece of one evaluation shares: the prior, the sampling settings and the
+    reference set."""
+
+    prior: Prior
+    samples: int
+    steps: int
+    guidance: float
+    seed: int
+    metric_points: int
+    version: int
+    scheduler: Scheduler
+    ref: torch.Tensor
+    ref_lab: np.ndarray
+
+    def family(self, k: int, fam: str, held: torch.Tensor, held_lab: np.ndarray,
+               ceiling: np.ndarray) -> dict:
+        """The scores of family ``fam`` (the ``k``-th prompted) from its prompt's samples."""
+        samples, metric_points, version = self.samples, self.metric_points, self.version
+        prompt = prompt_of(fam, version)
+        gen = self.prior.sample(prompt, samples, self.guidance, self.steps, self.seed + k,
+                                scheduler=self.scheduler).clouds
+        g = subsample(gen, metric_points, seed=2)
+        acc = one_nn_accuracy(chamfer_matrix(g, self.ref),
+                              np.full(samples, family_index(fam, version)), self.ref_lab)
+        real = held[held_lab == family_index(fam, version)]
+        return {
+            "prompt": prompt, "accuracy": float(acc.mean()),
+            "ceiling": float(ceiling[held_lab == family_index(fam, version)].mean()),
+            "one_nna": one_nna(g, real), "spread_ratio": spread(g) / max(spread(real), 1e-12),
+            "extent_ratio": float(np.ptp(gen, 1).max(1).mean()),
+        }
+
+    def nearest(self, prompt: str, n: int, s: int) -> np.ndarray:
+        """The family of the nearest reference of each of ``n`` samples of ``prompt``."""
+        g = subsample(self.prior.sample(prompt, n, self.guidance, self.steps, s,
+                                        scheduler=self.scheduler).clouds,
+                      self.metric_points, seed=2)
+        return self.ref_lab[chamfer_matrix(g, self.ref).argmin(1).numpy()]
+
+
+def _families(run: EvalRun, fams: list[str], held, held_lab, ceiling, res: dict,
+              parts: Compute, log: Callable[[str], object] | None) -> None:
+    """Per-family scores into ``res["families"]`` and their summary into ``res``."""
+    accs = []
+    for k, fam in enumerate(fams):
+        r = res["families"][fam] = parts(f"family/{fam}", lambda k=k, fam=fam: run.family(
+            k, fam, held, held_lab, ceiling))
+        accs.append(r["accuracy"])
+        if log is not None:
+            log(f"{fam:10s} acc {r['accuracy']:.2f}  ceiling {r['ceiling']:.2f}  1-NNA "
+                f"{r['one_nna']:.2f}")
+    res["accuracy"] = float(np.mean(accs))
+    res["min_accuracy"] = float(np.min(accs))
+    res["ceiling"] = float(np.mean([res["families"][f]["ceiling"] for f in fams]))
+
+
+def _paraphrases(run: EvalRun, ref_fams: list[str], res: dict, parts: Compute,
+                 log: Callable[[str], object] | None) -> None:
+    """Accuracy on the captions unlike the training templates (:data:`PARAPHRASES`)."""
+    para = {}
+    for i, (prompt, ok) in enumerate(PARAPHRASES.items()):
+        if not set(ok) <= set(ref_fams):
+            continue
+        para[prompt] = parts(f"paraphrase/{prompt}", lambda i=i, prompt=prompt, ok=ok: {
+            "families": list(ok), "accuracy": float(np.isin(
+                run.nearest(prompt, run.samples, run.seed + 100 + i),
+                [family_index(f, run.version) for f in ok]).mean())})
+        if log is not None:
+            log(f"{prompt!r}: {para[prompt]['accuracy']:.2f}")
+    res["paraphrases"] = para
+    res["paraphrase_accuracy"] = (float(np.mean([p["accuracy"] for p in para.values()]))
+                                  if para else None)
+
+
+def _heldout_paraphrases(run: EvalRun, fams: list[str], res: dict, parts: Compute) -> None:
+    """Accuracy on the held-out phrasings of each family (corpus 2)."""
+    held_para = {}
+    for k, fam in enumerate(fams):
+        for j, prompt in enumerate(heldout_prompts(fam, run.version)):
+            held_para[prompt] = parts(f"heldout/{prompt}", lambda k=k, j=j, fam=fam,
+                                      prompt=prompt: {"family": fam, "accuracy": float((
+                                          run.nearest(prompt, max(2, run.samples // 4),
+                                                      run.seed + 200 + 2 * k + j)
+                                          == family_index(fam, run.version)).mean())})
+    res["heldout_paraphrases"] = held_para
+    res["heldout_paraphrase_accuracy"] = float(np.mean(
+        [p["accuracy"] for p in held_para.values()]))
 
 
 def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
@@ -143,7 +242,7 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
     ref_fams = reference_families or all_fams
     missing = set(fams) - set(ref_fams)
     if missing:
-        raise ValueError(f"families without references: {', '.join(sorted(missing))}")
+        raise InputError(f"families without references: {', '.join(sorted(missing))}")
     t0 = time.perf_counter()
     ref, ref_lab = real_set("reference", reference_per_family, ref_fams, points=metric_points,
                             version=version)
@@ -155,62 +254,13 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
         "samples": samples, "steps": steps, "guidance": guidance, "seed": seed, "eta": eta,
         "reference_per_family": reference_per_family, "heldout_per_family": heldout_per_family,
         "metric_points": metric_points, "corpus": version}}
-    sched = scheduler_for(eta, prior.scheduler.schedule)
-    accs = []
-    def family(k: int, fam: str) -> dict:
-        prompt = prompt_of(fam, version)
-        gen = prior.sample(prompt, samples, guidance, steps, seed + k, scheduler=sched).clouds
-        g = subsample(gen, metric_points, seed=2)
-        acc = one_nn_accuracy(chamfer_matrix(g, ref), np.full(samples, family_index(fam, version)),
-                              ref_lab)
-        real = held[held_lab == family_index(fam, version)]
-        return {
-            "prompt": prompt, "accuracy": float(acc.mean()),
-            "ceiling": float(ceiling[held_lab == family_index(fam, version)].mean()),
-            "one_nna": one_nna(g, real), "spread_ratio": spread(g) / max(spread(real), 1e-12),
-            "extent_ratio": float(np.ptp(gen, 1).max(1).mean()),
-        }
-
-    for k, fam in enumerate(fams):
-        r = res["families"][fam] = parts(f"family/{fam}", lambda k=k, fam=fam: family(k, fam))
-        accs.append(r["accuracy"])
-        if log is not None:
-            log(f"{fam:10s} acc {r['accuracy']:.2f}  ceiling {r['ceiling']:.2f}  1-NNA "
-                f"{r['one_nna']:.2f}")
-    res["accuracy"] = float(np.mean(accs))
-    res["min_accuracy"] = float(np.min(accs))
-    res["ceiling"] = float(np.mean([res["families"][f]["ceiling"] for f in fams]))
-    def nearest(prompt: str, n: int, s: int) -> np.ndarray:
-        g = subsample(prior.sample(prompt, n, guidance, steps, s, scheduler=sched).clouds,
-                      metric_points, seed=2)
-        return ref_lab[chamfer_matrix(g, ref).argmin(1).numpy()]
-
+    run = EvalRun(prior, samples, steps, guidance, seed, metric_points, version,
+                  scheduler_for(eta, prior.scheduler.schedule), ref, ref_lab)
+    _families(run, fams, held, held_lab, ceiling, res, parts, log)
     if paraphrases:
-        para = {}
-        for i, (prompt, ok) in enumerate(PARAPHRASES.items()):
-            if not set(ok) <= set(ref_fams):
-                continue
-            para[prompt] = parts(f"paraphrase/{prompt}", lambda i=i, prompt=prompt, ok=ok: {
-                "families": list(ok), "accuracy": float(np.isin(
-                    nearest(prompt, samples, seed + 100 + i),
-                    [family_index(f, version) for f in ok]).mean())})
-            if log is not None:
-                log(f"{prompt!r}: {para[prompt]['accuracy']:.2f}")
-        res["paraphrases"] = para
-        res["paraphrase_accuracy"] = (float(np.mean([p["accuracy"] for p in para.values()]))
-                                      if para else None)
+        _paraphrases(run, ref_fams, res, parts, log)
     if paraphrases and version != 1:
-        held_para = {}
-        for k, fam in enumerate(fams):
-            for j, prompt in enumerate(heldout_prompts(fam, version)):
-                held_para[prompt] = parts(f"heldout/{prompt}", lambda k=k, j=j, fam=fam,
-                                          prompt=prompt: {"family": fam, "accuracy": float((
-                                              nearest(prompt, max(2, samples // 4),
-                                                      seed + 200 + 2 * k + j)
-                                              == family_index(fam, version)).mean())})
-        res["heldout_paraphrases"] = held_para
-        res["heldout_paraphrase_accuracy"] = float(np.mean(
-            [p["accuracy"] for p in held_para.values()]))
+        _heldout_paraphrases(run, fams, res, parts)
     if interpolate:
         res["interpolations"] = [parts(f"interpolation/{a}/{b}", lambda a=a, b=b: interpolation(
             prior, a, b, ref, ref_lab, steps, guidance, seed, eta=eta, version=version))

@@ -17,9 +17,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from dbtool.errors import InputError
 from dbtool.pointcloud import save_npz, save_ply
-from dbtool.prior.pipeline import Prior
-from dbtool.prior.schedulers import scheduler_for
+from dbtool.prior.sampling.pipeline import Prior
+from dbtool.prior.sampling.schedulers import scheduler_for
 from dbtool.runs import write_json
 from dbtool.viz.clouds import cloud_grid
 
@@ -45,14 +46,14 @@ def slug(prompt: str) -> str:
 def check_prompts(prompts: list[str]) -> None:
     """Refuse empty prompts (before any model is loaded)."""
     if not prompts or any(not p.strip() for p in prompts):
-        raise ValueError("the prompt is empty: say what to generate, e.g. \"a star\"")
+        raise InputError("the prompt is empty: say what to generate, e.g. \"a star\"")
 
 
 def generate(prior: Prior, prompts: list[str], settings: GenerateSettings, out: Path) -> dict:
     """Sample ``settings.n`` clouds per prompt, write them to ``out``; return a summary."""
     check_prompts(prompts)
     if settings.n < 1 or settings.steps < 1:
-        raise ValueError("-n and --steps must be at least 1")
+        raise InputError("-n and --steps must be at least 1")
     t0 = time.perf_counter()
     res = prior.sample(prompts, settings.n, settings.guidance, settings.steps, settings.seed,
                        upsample=settings.upsample,
@@ -90,8 +91,8 @@ KNOWN = 0.7  # a prompt whose best cosine similarity to a corpus caption is belo
 def known_captions(version: int = 1) -> tuple[list[str], torch.Tensor]:
     """The captions the prior of ``version`` was trained on (three draws per family, which
     covers every name and template) and their embeddings."""
-    from dbtool.prior import text
-    from dbtool.prior.train import corpus_module
+    from dbtool.prior.corpora.versions import corpus_module
+    from dbtool.prior.sampling import text
 
     mod = corpus_module(version)
     caps = sorted({c for f in mod.FAMILIES for i in range(3)
@@ -101,7 +102,7 @@ def known_captions(version: int = 1) -> tuple[list[str], torch.Tensor]:
 
 def nearest_captions(prompt: str, k: int = 3, version: int = 1) -> list[tuple[str, float]]:
     """The ``k`` known captions closest to ``prompt`` (cosine similarity of the embeddings)."""
-    from dbtool.prior import text
+    from dbtool.prior.sampling import text
 
     caps, emb = known_captions(version)
     sim = (text.encode(prompt) @ emb.T)[0]

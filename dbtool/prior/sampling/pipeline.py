@@ -1,7 +1,7 @@
 """The prior as one object: shipped weights, prompts -> point clouds, intermediate x_t.
 
-:class:`Prior` keeps the model, its samplers (:mod:`dbtool.prior.schedulers`) and the text
-encoder apart (diffusers-style) and is the only thing the co-design code talks to. Any
+:class:`Prior` keeps the model, its schedulers (:mod:`dbtool.prior.sampling.schedulers`) and the
+text encoder apart (diffusers-style) and is the only thing the co-design code talks to. Any
 backbone with the call signature ``eps = backbone(x_t, t, cond)`` (clouds ``(B, N, 3)`` in
 model space, integer timesteps, ``(B, 384)`` conditions) can replace the shipped transformer,
 e.g. a GPU-trained model or real Point-E weights behind an adapter: pass it as
@@ -10,6 +10,7 @@ e.g. a GPU-trained model or real Point-E weights behind an adapter: pass it as
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,19 +18,29 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from dbtool.errors import InputError
 from dbtool.precision import use_bf16
-from dbtool.prior import text
-from dbtool.prior.diffusion import SCALE, EpsModel, Step, denoise
-from dbtool.prior.model import ModelConfig, PointDiffusionTransformer
-from dbtool.prior.schedulers import DDIMScheduler, DDPMScheduler, NoiseSchedule, Scheduler
+from dbtool.prior.sampling import text
+from dbtool.prior.sampling.diffusion import SCALE, EpsModel, Step, denoise
+from dbtool.prior.sampling.model import ModelConfig, PointDiffusionTransformer
+from dbtool.prior.sampling.schedulers import (
+    DDIMScheduler,
+    DDPMScheduler,
+    NoiseSchedule,
+    Scheduler,
+    schedule_for,
+)
 
-WEIGHTS_ROOT = Path(__file__).parent / "weights"
+WEIGHTS_ROOT = Path(__file__).parents[1] / "weights"  # dbtool/prior/weights
 DEFAULT_VERSION = 1  # the shipped prior; every version keeps its folder weights/vN
+
+
+CONFIG = "config.json"  # in a weights folder: the noise schedules its models were trained with
 
 
 def weights_dir(version: int = DEFAULT_VERSION) -> Path:
     """The folder of the shipped weights of prior ``version`` (base.pt, upsampler.pt,
-    eval.json)."""
+    config.json, eval.json)."""
     path = WEIGHTS_ROOT / f"v{version}"
     if not path.is_dir():
         known = sorted(p.name for p in WEIGHTS_ROOT.glob("v*") if p.is_dir())
@@ -46,14 +57,38 @@ FINE_POINTS = 4096
 MAX_GUIDANCE = 50.0
 
 
-class CheckpointError(ValueError):
+class CheckpointError(InputError):
     """A weights file is missing or is not a dbtool prior checkpoint."""
+
+
+def weights_config(folder: Path) -> dict:
+    """A weights folder's ``config.json`` (``{"schedules": {kind: NoiseSchedule.config()}}``),
+    ``{}`` where the folder has none."""
+    path = Path(folder) / CONFIG
+    if not path.is_file():
+        return {}
+    try:
+        config = json.loads(path.read_text())
+    except ValueError as exc:
+        raise CheckpointError(f"not a readable weights configuration: {path}") from exc
+    if not isinstance(config, dict):
+        raise CheckpointError(f"not a weights configuration: {path}")
+    return config
+
+
+def model_schedule(kind: str, meta: dict, config: dict) -> NoiseSchedule:
+    """The noise schedule the ``kind`` model was trained with: the one its weights file
+    records (``meta["schedule"]``, :func:`~dbtool.prior.training.train.export_weights`), else
+    the one its weights folder's ``config`` gives, else the one ``kind`` trains with."""
+    saved = meta.get("schedule") or config.get("schedules", {}).get(kind)
+    return NoiseSchedule.from_config(saved) if saved else schedule_for(kind)
 
 
 def load_model(path: str | Path, kind: str | None = None) -> tuple[PointDiffusionTransformer,
                                                                     dict]:
-    """A model and its metadata from a file written by :func:`~dbtool.prior.train.export_weights`
-    (or a training ``checkpoint.pt``, whose EMA weights are used). ``kind`` (``"base"`` or
+    """A model and its metadata from a file written by
+    :func:`~dbtool.prior.training.train.export_weights` (or a training ``checkpoint.pt``, whose
+    EMA weights are used). ``kind`` (``"base"`` or
     ``"upsampler"``), when given, must match the file's. Files are read with
     ``weights_only=True``: a checkpoint cannot run code."""
     path = Path(path)
@@ -98,15 +133,16 @@ class Prior:
 
     ``scheduler`` samples the base model (default: strided DDPM on the cosine schedule it was
     trained with), ``up_scheduler`` the upsampler (default: DDIM on the linear schedule); a
-    sampler on another schedule than the model's training schedule gives wrong samples."""
+    scheduler on another schedule than the model's training schedule gives wrong samples.
+    :meth:`load` builds both on the schedules stored with the weights."""
 
     def __init__(self, base: EpsModel, upsampler: PointDiffusionTransformer | None = None,
                  bf16: bool | None = None, scheduler: Scheduler | None = None,
                  up_scheduler: Scheduler | None = None) -> None:
         self.base, self.upsampler, self.bf16 = base, upsampler, bf16
         self.corpus = 1  # the corpus version the base model was trained on (set by load)
-        self.scheduler = scheduler or DDPMScheduler(NoiseSchedule.cosine())
-        self.up_scheduler = up_scheduler or DDIMScheduler(NoiseSchedule.linear())
+        self.scheduler = scheduler or DDPMScheduler(schedule_for("base"))
+        self.up_scheduler = up_scheduler or DDIMScheduler(schedule_for("upsampler"))
 
     @classmethod
     def load(cls, base: str | Path | None = None, upsampler: str | Path | None = None,
@@ -114,15 +150,23 @@ class Prior:
              **schedulers: Scheduler) -> Prior:
         """The shipped weights of ``version`` (default: ``DEFAULT_VERSION``) or the given
         files; the upsampler is loaded when ``with_upsampler`` or a path is given.
-        ``schedulers``: ``scheduler`` and/or ``up_scheduler`` (see :class:`Prior`)."""
+        ``schedulers``: ``scheduler`` and/or ``up_scheduler`` (see :class:`Prior`); by default
+        DDPM and DDIM on the noise schedules stored with the weights (:func:`model_schedule`)."""
         folder = weights_dir(version) if version is not None else WEIGHTS
+        config = weights_config(folder)
         model, meta = load_model(base or folder / "base.pt", "base")
+        if not schedulers.get("scheduler"):
+            schedulers["scheduler"] = DDPMScheduler(
+                model_schedule("base", meta, config if base is None else {}))
         up = None
         if with_upsampler or upsampler is not None:
             if upsampler is None and not (folder / "upsampler.pt").is_file():
                 raise CheckpointError(f"the shipped prior {folder.name} has no upsampler; load "
                                       "it with with_upsampler=False or give an upsampler file")
-            up, _ = load_model(upsampler or folder / "upsampler.pt", "upsampler")
+            up, up_meta = load_model(upsampler or folder / "upsampler.pt", "upsampler")
+            if not schedulers.get("up_scheduler"):
+                schedulers["up_scheduler"] = DDIMScheduler(model_schedule(
+                    "upsampler", up_meta, config if upsampler is None else {}))
         prior = cls(model, up, **schedulers)
         prior.corpus = int(meta.get("train_config", meta).get("corpus", 1))
         return prior
@@ -145,12 +189,13 @@ class Prior:
                 seed: int = 0, points: int = COARSE_POINTS, include: Sequence[int] = (),
                 t_start: int | None = None, x_T: torch.Tensor | None = None,
                 scheduler: Scheduler | None = None) -> Iterator[Step]:
-        """The base sampler (``scheduler``, default :attr:`scheduler`) as a generator of
-        :class:`Step` (model space, see :func:`~dbtool.prior.diffusion.denoise`); the caller
-        may replace ``step.x`` between updates."""
+        """The base model's denoising loop (steps by ``scheduler``, default :attr:`scheduler`)
+        as a generator of :class:`Step` (model space, see
+        :func:`~dbtool.prior.sampling.diffusion.denoise`); the caller may replace ``step.x``
+        between updates."""
         for c, s, *_ in conds:
             if not np.isfinite(s) or abs(s) > MAX_GUIDANCE:
-                raise ValueError(f"guidance scale {s} is outside [-{MAX_GUIDANCE}, "
+                raise InputError(f"guidance scale {s} is outside [-{MAX_GUIDANCE}, "
                                  f"{MAX_GUIDANCE}]")
             if c.dim() != 2 or c.shape[-1] != text.DIM:
                 raise ValueError(f"a condition must have shape (1 or n, {text.DIM})")
@@ -171,7 +216,7 @@ class Prior:
         ``scheduler`` overrides :attr:`scheduler` (strided DDPM; DDPM gave sharper samples
         than DDIM, ``MODEL_CARD.md``). ``extra`` adds composed guidance terms
         ``(prompt or embedding, scale)`` (docs/method.md §6);
-        ``return_at`` lists timesteps whose x_t is returned. They join the sampler's strided
+        ``return_at`` lists timesteps whose x_t is returned. They join the scheduler's strided
         grid, so a seed gives a slightly different x_0 with and without them (the same one
         for the same ``return_at``)."""
         conds: list[tuple[torch.Tensor, float]] = []
@@ -215,7 +260,7 @@ class Prior:
         n = c.shape[0]
         gen = torch.Generator().manual_seed(seed + 1)
         x_T = torch.randn((n, FINE_POINTS - c.shape[1], 3), generator=gen)
-        null = torch.zeros(1, text.DIM)
+        null = text.null()
 
         def eps(x, t, cond):
             reps = x.shape[0] // n
