@@ -135,6 +135,72 @@ def _number(text: str, column: str, err: Callable[[str], LogError]) -> float:
     return v
 
 
+def _comment(line: str, meta: dict[str, str], notes: list[str],
+             err: Callable[[str], LogError]) -> None:
+    """A ``#`` line: ``# key: value`` metadata, or a free note."""
+    m = _META.match(line)
+    if m is None:
+        if line.lstrip("#").strip():
+            meta.setdefault("notes", "")
+            notes.append(line.lstrip("#").strip())
+        return
+    key, value = m.group(1), m.group(2).strip()
+    if key == "notes":
+        meta.setdefault("notes", "")
+        notes.append(value)
+    elif key == "source" and value not in SOURCES:
+        raise err(f"unknown source {value!r} (expected real, sim or illustrative)")
+    elif key in meta and meta[key] != value:
+        raise err(f"metadata {key!r} given twice: {meta[key]!r}, then {value!r}")
+    else:
+        meta[key] = value
+
+
+def _row(fields: list[str], err: Callable[[str], LogError]) -> tuple[str, str, int, float, float]:
+    """``(tendon, phase, step, displacement, tip)`` of one data row, each value checked."""
+    if len(fields) != len(HEADER):
+        raise err(f"row has {len(fields)} fields, expected {len(HEADER)}")
+    tendon, phase, step_s, disp_s, tip_s = fields
+    if tendon not in TENDONS:
+        raise err(f"unknown tendon {tendon!r} (expected flexion or extension)")
+    if phase not in PHASES:
+        raise err(f"unknown phase {phase!r} (expected pull or release)")
+    try:
+        step = int(step_s)
+    except ValueError:
+        raise err(f"step is not an integer: {step_s!r}") from None
+    disp = _number(disp_s, "displacement_mm", err)
+    tip = _number(tip_s, "tip_distance_mm", err)
+    if disp < 0:
+        raise err(f"negative displacement_mm {disp_s}")
+    if tip <= 0:
+        raise err(f"tip_distance_mm must be > 0, got {tip_s}")
+    return tendon, phase, step, disp, tip
+
+
+def _follows(seq: list[tuple[str, float, float]], tendon: str, phase: str, step: int,
+             disp: float, disp_s: str, err: Callable[[str], LogError]) -> None:
+    """Check that a row continues its tendon's sequence ``seq``: consecutive steps from 0,
+    pull rows (displacement not decreasing) before release rows (not increasing)."""
+    if step != len(seq):
+        if not seq:
+            raise err(f"{tendon} starts at step {step} (expected 0)")
+        if step < len(seq):
+            raise err(f"duplicate {tendon} step {step} (the last was {len(seq) - 1})")
+        raise err(f"{tendon} step {step} after step {len(seq) - 1} (expected {len(seq)})")
+    if not seq:
+        if phase != "pull":
+            raise err(f"{tendon} starts with release: it needs pull rows first")
+        return
+    prev_phase, prev = seq[-1][0], seq[-1][1]
+    if phase == "pull" and prev_phase == "release":
+        raise err(f"{tendon} pull after release (pull rows come first)")
+    if phase == "pull" and disp < prev:
+        raise err(f"{tendon} pull displacement decreases: {disp_s} after {prev!r}")
+    if phase == "release" and disp > prev:
+        raise err(f"{tendon} release displacement increases: {disp_s} after {prev!r}")
+
+
 def parse_log(text: str, name: str = "<log>") -> TipLog:
     """Parse the text of a log (docs/realgap.md); raises :class:`LogError`."""
     lines = text.removeprefix("\ufeff").splitlines()
@@ -151,22 +217,7 @@ def parse_log(text: str, name: str = "<log>") -> TipLog:
         if not line:
             continue
         if line.startswith("#"):
-            m = _META.match(line)
-            if m is None:
-                if line.lstrip("#").strip():
-                    meta.setdefault("notes", "")
-                    notes.append(line.lstrip("#").strip())
-                continue
-            key, value = m.group(1), m.group(2).strip()
-            if key == "notes":
-                meta.setdefault("notes", "")
-                notes.append(value)
-            elif key == "source" and value not in SOURCES:
-                raise err(f"unknown source {value!r} (expected real, sim or illustrative)")
-            elif key in meta and meta[key] != value:
-                raise err(f"metadata {key!r} given twice: {meta[key]!r}, then {value!r}")
-            else:
-                meta[key] = value
+            _comment(line, meta, notes, err)
             continue
         fields = [f.strip() for f in next(csv.reader([line]))]
         if not header_line:
@@ -177,40 +228,9 @@ def parse_log(text: str, name: str = "<log>") -> TipLog:
             continue
         if tuple(fields) == HEADER:
             raise err(f"the header again (first on line {header_line})")
-        if len(fields) != len(HEADER):
-            raise err(f"row has {len(fields)} fields, expected {len(HEADER)}")
-        tendon, phase, step_s, disp_s, tip_s = fields
-        if tendon not in TENDONS:
-            raise err(f"unknown tendon {tendon!r} (expected flexion or extension)")
-        if phase not in PHASES:
-            raise err(f"unknown phase {phase!r} (expected pull or release)")
-        try:
-            step = int(step_s)
-        except ValueError:
-            raise err(f"step is not an integer: {step_s!r}") from None
-        disp = _number(disp_s, "displacement_mm", err)
-        tip = _number(tip_s, "tip_distance_mm", err)
-        if disp < 0:
-            raise err(f"negative displacement_mm {disp_s}")
-        if tip <= 0:
-            raise err(f"tip_distance_mm must be > 0, got {tip_s}")
+        tendon, phase, step, disp, tip = _row(fields, err)
         seq = rows.setdefault(tendon, [])
-        if step != len(seq):
-            if not seq:
-                raise err(f"{tendon} starts at step {step} (expected 0)")
-            if step < len(seq):
-                raise err(f"duplicate {tendon} step {step} (the last was {len(seq) - 1})")
-            raise err(f"{tendon} step {step} after step {len(seq) - 1} (expected {len(seq)})")
-        if not seq and phase != "pull":
-            raise err(f"{tendon} starts with release: it needs pull rows first")
-        if seq:
-            prev_phase, prev = seq[-1][0], seq[-1][1]
-            if phase == "pull" and prev_phase == "release":
-                raise err(f"{tendon} pull after release (pull rows come first)")
-            if phase == "pull" and disp < prev:
-                raise err(f"{tendon} pull displacement decreases: {disp_s} after {prev!r}")
-            if phase == "release" and disp > prev:
-                raise err(f"{tendon} release displacement increases: {disp_s} after {prev!r}")
+        _follows(seq, tendon, phase, step, disp, fields[3], err)
         seq.append((phase, disp, tip))
     if not header_line:
         raise LogError(f"{name}:{max(1, len(lines))}: no header line "
