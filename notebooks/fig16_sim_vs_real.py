@@ -25,7 +25,7 @@
 # differentiable simulator, and replays the log again with the fitted parameters.
 #
 # **The example log is illustrative, not a measurement.** It was made by
-# `python -m dbtool.realgap.example` from the simulator with hidden parameters, a fast change
+# `python scripts/realgap_example_log.py` from the simulator with hidden parameters, a fast change
 # on release and noise added (its `notes` metadata says which). With a log measured on a
 # printed gripper, the same calls apply.
 #

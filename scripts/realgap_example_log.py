@@ -8,7 +8,7 @@ so the jump is largest at full contraction: friction changing direction, the lin
 elongation relaxing), and every reading gets Gaussian noise of :data:`NOISE_MM` (seed
 :data:`SEED`).
 
-    python -m dbtool.realgap.example [DESIGN] [-o OUT.csv]
+    python scripts/realgap_example_log.py [DESIGN] [-o OUT.csv]
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ HIDDEN = TendonParams(gain=1.3, stiffness_scale=1.0, friction_mm=1.2, slack_mm=0
 RELEASE_JUMP = 0.1
 NOISE_MM = 0.1
 SEED = 16
-DESIGN = Path("exports/gripping-seed0")
+DESIGN = Path(__file__).resolve().parents[1] / "exports" / "gripping-seed0"
 NAME = "tip_distance_illustrative.csv"
 
 
@@ -48,7 +48,7 @@ def illustrative(design: str | Path = DESIGN, step_mm: float = 2.0,
         curves[t] = Curve(t, list(c.phase), c.displacement.copy(), np.round(tip, 3))
     info = {
         "source": "illustrative", **meta,
-        "notes": ("NOT A MEASUREMENT. Made by `python -m dbtool.realgap.example` from the "
+        "notes": ("NOT A MEASUREMENT. Made by `python scripts/realgap_example_log.py` from the "
                   f"simulator with hidden parameters {json.dumps(asdict(HIDDEN))}, release "
                   f"readings moved {RELEASE_JUMP:g} of the way back to the start (a fast "
                   f"change on release from full contraction) and Gaussian noise "

@@ -1,7 +1,7 @@
 """Tables 4 and 5 as markdown, rendered from the presets (:func:`dbtool.codesign.config.preset`).
 
 ``docs/method.md`` holds Table 4 in §4 between ``<!-- table4:begin -->`` and
-``<!-- table4:end -->`` and Table 5 in §5 likewise; ``python -m dbtool.codesign.tables
+``<!-- table4:end -->`` and Table 5 in §5 likewise; ``python docs/method_tables.py
 docs/method.md`` rewrites both, and a test fails when the file and the presets disagree.
 Every field of the two config dataclasses is shown, so a new setting appears in the docs as
 soon as it exists; fields the paper's tables do not give are marked as dbtool's.
@@ -13,11 +13,11 @@ import sys
 from dataclasses import fields
 from pathlib import Path
 
-from dbtool.codesign.config import PRESETS, TASKS, CodesignConfig, EmbeddingConfig, preset
+from dbtool.codesign.config import PRESETS, CodesignConfig, EmbeddingConfig, preset
+from dbtool.sim.task_names import NAMES as TASKS
+from dbtool.sim.task_names import TITLES
 
 NUMBERS = (4, 5)
-TITLES = {"balancing": "Balancing", "landing": "Landing", "crawling": "Crawling",
-          "hurdling": "Hurdling", "gripping": "Gripping", "box": "Moving a box"}
 
 # field -> row label; fields not listed here are dbtool's own and keep their name
 PAPER_ROWS = {
@@ -92,7 +92,7 @@ def splice(text: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m dbtool.codesign.tables [FILE]``: print the tables, or rewrite FILE's."""
+    """``python docs/method_tables.py [FILE]``: print the tables, or rewrite FILE's."""
     argv = sys.argv[1:] if argv is None else argv
     if not argv:
         print("\n\n".join(render(n) for n in NUMBERS))
