@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from dbtool.attributes import MEASURES, legs
+from dbtool.robotize.attributes import MEASURES, legs
 from dbtool.prior.corpora.corpus import make_shape
 from dbtool.prior.corpora.words import LOW
 
@@ -33,7 +33,7 @@ def test_legs_are_counted_on_the_ground():
 
 
 def test_attribute_control_runs_on_a_prior():
-    from dbtool.attributes import attribute_control, attribute_prompts, legs_control
+    from dbtool.robotize.attributes import attribute_control, attribute_prompts, legs_control
     from dbtool.prior.sampling.pipeline import Prior
 
     rows = attribute_prompts(["disk", "finger", "legged_ball"])

@@ -1,5 +1,5 @@
 """Geometric measurements of a cloud for the attribute words of the prior's corpus
-(docs/method.md §1); above the robotizer, whose solid gives the thickness.
+(docs/method.md §1), with the robotizer, whose reconstructed solid gives the thickness.
 
 They read only the points (canonical frame, y up), never the generator's parameters, so the
 model card can check that "a thin X" comes out thinner than "a thick X":
