@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from dbtool.robotize.attributes import MEASURES, legs
 from dbtool.prior.corpora.corpus import make_shape
 from dbtool.prior.corpora.words import LOW
+from dbtool.robotize.attributes import MEASURES, legs
 
 CASES = [("disk", "thickness"), ("cylinder", "height"), ("egg", "length"), ("plate", "width"),
          ("bar", "roundness"), ("finger", "taper"), ("worm", "curve"), ("ring", "thickness")]
@@ -33,8 +33,8 @@ def test_legs_are_counted_on_the_ground():
 
 
 def test_attribute_control_runs_on_a_prior():
-    from dbtool.robotize.attributes import attribute_control, attribute_prompts, legs_control
     from dbtool.prior.sampling.pipeline import Prior
+    from dbtool.robotize.attributes import attribute_control, attribute_prompts, legs_control
 
     rows = attribute_prompts(["disk", "finger", "legged_ball"])
     assert {"family": "disk", "attribute": "thickness", "low": "a thin disk",
