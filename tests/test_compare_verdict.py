@@ -52,3 +52,24 @@ def test_spending_counts_units_as_the_budget_does(tmp_path):
     png = why_figure(tmp_path, "crawling", ["diffusebot", "voxel"], tmp_path / "why.png")
     img = mpimg.imread(png)
     assert img.shape[0] > 200 and img.std() > 0.01
+
+
+def test_the_results_page_figures_are_remade_from_the_committed_comparison(tmp_path):
+    """docs/results_figures.py draws docs/results.md's per-cell figures from a comparison
+    folder (here a copy of the committed one, which keeps no montages)."""
+    import importlib.util
+    import shutil
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("results_figures",
+                                                  root / "docs" / "results_figures.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    folder = tmp_path / "compare-quick"
+    shutil.copytree(script.FOLDER, folder)
+    for task, seed in script.FIGURES:
+        (folder / f"why-{task}-s{seed}.png").unlink()
+    assert script.main(folder) == 0
+    for task, seed in script.FIGURES:
+        assert (folder / f"why-{task}-s{seed}.png").stat().st_size > 10_000

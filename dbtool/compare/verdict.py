@@ -97,6 +97,8 @@ def why_figure(out_dir: str | Path, task: str, methods: list[str], path: str | P
         img = fig.add_subplot(grid[i, 1:])
         if (folder / "montage.png").is_file():
             img.imshow(mpimg.imread(folder / "montage.png"))
+        else:  # a comparison folder kept without its cells' montages
+            img.text(0.5, 0.5, f"no montage.png in {folder.name}", ha="center", va="center")
         img.set_axis_off()
         img.set_title(f"{TITLES.get(m, m)}: final design", fontsize=9)
     ax.set(xlabel="budget spent (forward-episode units)", ylabel="metric",
