@@ -50,3 +50,11 @@ def test_modules_are_small_and_the_cli_thin():
 
 def test_architecture_page_shows_the_current_layers():
     assert layers.main(["--check"]) == 0
+
+
+def test_api_reference_lists_every_module():
+    """docs/api/ has a page per part with every module (``python docs/api_pages.py``)."""
+    spec = importlib.util.spec_from_file_location("api_pages", ROOT / "docs" / "api_pages.py")
+    api = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(api)
+    assert api.main(["--check"]) == 0, "run `python docs/api_pages.py`"
