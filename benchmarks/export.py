@@ -6,8 +6,9 @@ gripper design (the newest ``runs/*/design.npz`` of gripping, or ``--design``).
 
 ``makers``: exports the reference gripper and the gripper designs in ``benchmarks/data/grippers``
 (other seeds) with the defaults (channels, print orientation, slicer check) and runs a maker's
-checks on each folder from its files alone (:func:`dbtool.export.verify.verify_export`, also
-slicing every part with the flexible-filament profile).
+checks on each folder from its files alone
+(:func:`dbtool.export.printing.verify.verify_export`, also slicing every part with the
+flexible-filament profile).
 
 ``validate``: exports designs (``--designs`` files, e.g. the six tasks' ``dbtool design``
 outputs) and ``--random N`` random robotized bodies (procedural corpus shapes of random families
@@ -56,7 +57,7 @@ def _newest_gripper() -> Path | None:
 def time_export(design_path: Path, infill: bool) -> dict:
     from dbtool.design import Design
     from dbtool.export.assembly import ExportConfig, build, export_design
-    from dbtool.export.infill import InfillConfig, voronoi_infill
+    from dbtool.export.geometry.infill import InfillConfig, voronoi_infill
 
     d = Design.load(design_path)
     rows = {}
@@ -184,7 +185,7 @@ DEGENERATE = sorted((Path(__file__).parent / "data" / "grippers" / "degenerate")
 def makers(paths: list[Path]) -> dict:
     from dbtool.design import Design
     from dbtool.export.assembly import ExportConfig, export_design
-    from dbtool.export.verify import verify_export
+    from dbtool.export.printing.verify import verify_export
 
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:

@@ -45,9 +45,9 @@ from IPython.display import Image, Markdown, display
 
 from dbtool.design import Design
 from dbtool.export.assembly import ExportConfig, export_design, report_markdown
-from dbtool.export.infill import InfillConfig, voronoi_infill
-from dbtool.export.sheet import draw_section
-from dbtool.export.verify import load_part, verify_export
+from dbtool.export.geometry.infill import InfillConfig, voronoi_infill
+from dbtool.export.printing.verify import load_part, verify_export
+from dbtool.export.reports.sheet import draw_section
 
 QUICK = os.environ.get("DBTOOL_QUICK", "0") == "1"
 REFERENCE = Path("../exports/gripping-seed0")

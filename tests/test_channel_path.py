@@ -7,7 +7,7 @@ import pytest
 
 from dbtool.export._manifold import manifold3d as m3
 from dbtool.export._manifold import mesh_arrays
-from dbtool.export.channel_path import (
+from dbtool.export.gripper.channel_path import (
     SurfaceDistance,
     closest_on_triangles,
     fillet,

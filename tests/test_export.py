@@ -15,10 +15,11 @@ from scipy.spatial import cKDTree
 
 from dbtool.atomic import atomic_folder
 from dbtool.design import Design
+from dbtool.errors import InputError
 from dbtool.export.assembly import ExportConfig, build, design_volume, export_design
-from dbtool.export.mesh import OccupancyField
-from dbtool.export.report import mesh_report, wall_thickness
-from dbtool.export.threemf import write_3mf
+from dbtool.export.geometry.mesh import OccupancyField
+from dbtool.export.printing.threemf import write_3mf
+from dbtool.export.reports.report import mesh_report, wall_thickness
 from dbtool.robotize.actuators import reference_robot, robot_from_occupancy
 from dbtool.sim.robot import Robot
 from dbtool.sim.tasks import TASKS, get_task
@@ -191,15 +192,32 @@ def test_bad_input_leaves_nothing_behind(tmp_path):
     d = Design("crawling", reference_robot(t, "box"), t.controller())
     d.robot = Robot(np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros((0, 4)),
                     d.robot.directions)
-    with pytest.raises(ValueError, match="no robot fields"):
+    with pytest.raises(InputError, match="no robot fields"):
         export_design(d, tmp_path / "x")
     d = Design("crawling", reference_robot(t, "box"), t.controller())
     d.robot.occupancy[:] = 0.0
-    with pytest.raises(ValueError, match="no active particles"):
+    with pytest.raises(InputError, match="no active particles"):
         export_design(d, tmp_path / "x")
-    with pytest.raises(ValueError, match="infill"):
+    with pytest.raises(InputError, match="infill"):
         export_design(_finger(), tmp_path / "x", ExportConfig(infill="honeycomb"))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_command_line_defaults_are_the_configs():
+    """``dbtool export``'s options default to ExportConfig's fields (one source), except --stl
+    and --3mf, where neither given means both."""
+    import inspect
+
+    from dbtool.cli.export import export_command
+
+    cfg = ExportConfig()
+    seen = set()
+    for name, param in inspect.signature(export_command).parameters.items():
+        field = name.rstrip("_")
+        if hasattr(cfg, field) and field not in ("stl", "threemf"):
+            assert param.default.default == getattr(cfg, field), name
+            seen.add(field)
+    assert {"channels", "tendon_diameter", "scale_mm", "infill", "slice", "orient"} <= seen
 
 
 def test_an_interrupted_export_keeps_the_previous_folder(tmp_path, monkeypatch):
@@ -269,7 +287,7 @@ def test_the_smoothed_ball_has_no_staircase_and_keeps_its_volume():
     """A ball of lattice sites: the old meshing (0.35-site smoothing, half-site grid) keeps the
     lattice's steps; the default (0.7 sites, quarter-site grid) rounds them off at equal
     volume (docs/export.md, staircase)."""
-    from dbtool.export.report import sharp_edges
+    from dbtool.export.reports.report import sharp_edges
 
     new, want = _ball(0.7, 4)
     old, _ = _ball(0.35, 2)

@@ -7,9 +7,10 @@ import manifold3d as m3
 import numpy as np
 import pytest
 
+from dbtool.errors import InputError
 from dbtool.export._manifold import to_trimesh as _trimesh
-from dbtool.export.infill import InfillConfig, voronoi_infill
-from dbtool.export.voxels import inside_layer
+from dbtool.export.geometry.infill import InfillConfig, voronoi_infill
+from dbtool.export.geometry.voxels import inside_layer
 
 
 def _inside(solid, pts: np.ndarray) -> np.ndarray:
@@ -129,13 +130,13 @@ def test_larger_spacing_gives_lighter_foam(cube, cube_infill):
 
 
 def test_empty_solid_raises():
-    with pytest.raises(ValueError, match="empty"):
+    with pytest.raises(InputError, match="empty"):
         voronoi_infill(m3.Manifold())
 
 
 def test_too_thin_for_the_shell_raises():
     plate = m3.Manifold.cube([20.0, 20.0, 2.0])  # thinner than 2 x 1.2 mm
-    with pytest.raises(ValueError, match="thinner than 2 x shell"):
+    with pytest.raises(InputError, match="thinner than 2 x shell"):
         voronoi_infill(plate)
 
 

@@ -16,10 +16,11 @@ import pytest
 import trimesh
 
 from dbtool.design import Design
+from dbtool.errors import InputError
 from dbtool.export.assembly import ExportConfig, build, export_design
-from dbtool.export.channel_path import fillet
-from dbtool.export.slicer import find_slicer
-from dbtool.export.verify import verify_export
+from dbtool.export.gripper.channel_path import fillet
+from dbtool.export.printing.slicer import find_slicer
+from dbtool.export.printing.verify import verify_export
 
 REFERENCE = Path(__file__).resolve().parents[1] / "exports" / "gripping-seed0"
 SLICER = find_slicer()
@@ -84,7 +85,7 @@ def test_a_knot_pocket_where_one_fits_and_none_in_a_thin_tip():
     strands are that thin, so its tendons have none."""
     import manifold3d as m3
 
-    from dbtool.export.channels import tip_exit
+    from dbtool.export.gripper.channels import tip_exit
 
     cfg = ExportConfig()
     before, anchor = np.array([0.0, 30.0, 0.0]), np.array([0.0, 10.0, 0.0])
@@ -165,8 +166,9 @@ def test_channels_take_the_line_and_tube_sizes_and_round_their_bends(made):
         assert t["ok"] and t["length_mm"] > 30
     cfg = ExportConfig(tendon_diameter=1.0, clearance=0.5, tube_diameter=3.0)
     assert (cfg.line_channel, 2 * cfg.seat_radius) == (1.5, 3.5)
-    with pytest.raises(ValueError, match="bend-radius"):
+    with pytest.raises(InputError, match="bend-radius"):
         ExportConfig(bend_radius=0.0)
+    assert cfg.channel_radius == 0.75
 
 
 def test_a_wall_no_route_can_keep_is_reported_as_failing():
@@ -193,7 +195,7 @@ def test_the_assembly_sheet_lists_parts_steps_and_line_lengths(made):
 
 def test_a_finger_that_stops_short_of_the_base_is_continued_up_to_it():
     from dbtool.export._manifold import manifold3d as m3
-    from dbtool.export.gripper import reach_root
+    from dbtool.export.gripper.parts import reach_root
 
     # a 10 x 30 x 8 mm finger whose top ends 6 mm below the base's lower face (y = 40)
     finger = m3.Manifold.cube([10.0, 30.0, 8.0]).translate([5.0, 4.0, 3.0])

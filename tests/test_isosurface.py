@@ -1,4 +1,4 @@
-"""Marching tetrahedra (dbtool.export.isosurface): closed, outward-oriented manifolds whose
+"""Marching tetrahedra (dbtool.export.geometry.isosurface): closed, outward-oriented manifolds whose
 volume converges to the level set's, also on the field that crashed manifold3d's level_set
 (``tests/data/level_set_crash.npz``), which is tried on manifold3d again in a subprocess."""
 
@@ -14,7 +14,7 @@ import pytest
 import trimesh
 
 from dbtool.export._manifold import to_trimesh
-from dbtool.export.isosurface import marching_tetrahedra
+from dbtool.export.geometry.isosurface import marching_tetrahedra
 
 # An actuator region of the hurdling task's star design, as the export before our own mesher
 # passed it to ``Manifold.level_set`` (grid values of the trilinear field minus the level, and
@@ -122,7 +122,7 @@ def test_manifold3d_level_set_on_the_field_that_crashed_it(crash_field_solid, tm
     """Runs manifold3d's ``level_set`` on the stored field in a subprocess. Killed by a signal:
     the known bug, reported as xfail (keep our mesher). It returns: it must be a right mesh of
     the field (one watertight volume, as large as ours), and the warning says that
-    ``dbtool.export.isosurface`` can be retired. Anything else fails."""
+    ``dbtool.export.geometry.isosurface`` can be retired. Anything else fails."""
     out = tmp_path / "level_set.npz"
     run = subprocess.run([sys.executable, "-c", _LEVEL_SET, str(CRASH_FIELD), str(out)],
                          capture_output=True, text=True, timeout=600)
@@ -130,7 +130,7 @@ def test_manifold3d_level_set_on_the_field_that_crashed_it(crash_field_solid, tm
     if run.returncode < 0:
         name = signal.Signals(-run.returncode).name
         pytest.xfail(f"manifold3d {release} Manifold.level_set dies of {name} on "
-                     f"{CRASH_FIELD.name}: keep dbtool.export.isosurface")
+                     f"{CRASH_FIELD.name}: keep dbtool.export.geometry.isosurface")
     assert run.returncode == 0, run.stderr[-3000:]
     got = np.load(out)
     assert str(got["status"]).endswith("NoError"), got["status"]
@@ -138,4 +138,4 @@ def test_manifold3d_level_set_on_the_field_that_crashed_it(crash_field_solid, tm
     assert mesh.is_watertight and mesh.is_volume and len(mesh.split(only_watertight=False)) == 1
     assert mesh.volume == pytest.approx(crash_field_solid.volume(), rel=0.01)
     warnings.warn(f"manifold3d {release} meshes {CRASH_FIELD.name}: Manifold.level_set could "
-                  "replace dbtool.export.isosurface", stacklevel=1)
+                  "replace dbtool.export.geometry.isosurface", stacklevel=1)

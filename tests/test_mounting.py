@@ -7,7 +7,7 @@ import pytest
 from matplotlib.path import Path as MplPath
 
 from dbtool.export._manifold import manifold3d as m3
-from dbtool.export.mounting import (
+from dbtool.export.gripper.mounting import (
     alignment_pins,
     hole_clearance,
     mount_holes,
@@ -39,7 +39,7 @@ def finger():
     pockets filled back in (its channels stay cut)."""
     import json
 
-    from dbtool.export.verify import load_part
+    from dbtool.export.printing.verify import load_part
 
     rep = json.loads((FINGER_STL.parent / "report.json").read_text())
     pockets = pin_solids(rep["mounting"]["pins"], ROOT_MM, clearance=0.25)[1]

@@ -1,5 +1,5 @@
-"""Print orientation (dbtool.export.orient, docs/export.md): the rule's choices on parts whose
-best pose is known, and the posed solid's geometry."""
+"""Print orientation (dbtool.export.printing.orient, docs/export.md): the rule's choices on parts
+whose best pose is known, and the posed solid's geometry."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 
 from dbtool.export._manifold import manifold3d as m3
 from dbtool.export._manifold import mesh_arrays
-from dbtool.export.orient import _pick, apply_pose, choose_pose, rotation_to_down
+from dbtool.export.printing.orient import _pick, apply_pose, choose_pose, rotation_to_down
 
 
 def _posed_ok(solid, pose):

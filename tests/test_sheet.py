@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dbtool.export import sheet as S
 from dbtool.export._manifold import manifold3d as m3
+from dbtool.export.reports import sheet as S
 
 HOLES = [[8.0, 8.0], [52.0, 8.0], [8.0, 112.0], [52.0, 112.0]]
 CHANNEL_R = 0.75

@@ -10,9 +10,10 @@ import subprocess
 import numpy as np
 import pytest
 
-from dbtool.export import slicer
+from dbtool.errors import RunError
 from dbtool.export._manifold import manifold3d as m3
-from dbtool.export.mesh import write_stl
+from dbtool.export.geometry.mesh import write_stl
+from dbtool.export.printing import slicer
 
 SKIP_REASON = "PrusaSlicer not installed: apt-get install prusa-slicer"
 CUBE_MM = 20.0
@@ -72,6 +73,7 @@ def test_a_missing_slicer_is_a_clear_error(monkeypatch, tmp_path):
     assert slicer.find_slicer() is None
     with pytest.raises(slicer.SlicerMissing, match="prusa-slicer") as err:
         slicer.slice_part(tmp_path / "x.stl")
+    assert isinstance(err.value, RunError)  # the command line prints it as one error line
     assert "$DBTOOL_SLICER" in str(err.value)
     (tmp_path / "not-executable").write_text("")
     monkeypatch.setenv(slicer.ENV_VAR, str(tmp_path / "not-executable"))

@@ -1,5 +1,5 @@
-"""3MF with materials and a plate layout (dbtool.export.threemf, docs/export.md): read back by
-trimesh, by xml.etree, and by PrusaSlicer where it is installed."""
+"""3MF with materials and a plate layout (dbtool.export.printing.threemf, docs/export.md): read
+back by trimesh, by xml.etree, and by PrusaSlicer where it is installed."""
 
 from __future__ import annotations
 
@@ -14,8 +14,8 @@ import pytest
 import trimesh
 
 from dbtool.export._manifold import manifold3d as m3
-from dbtool.export.orient import apply_pose, choose_pose
-from dbtool.export.threemf import NS, model_xml, plate_layout, transform_attr, write_3mf
+from dbtool.export.printing.orient import apply_pose, choose_pose
+from dbtool.export.printing.threemf import NS, model_xml, plate_layout, transform_attr, write_3mf
 
 Q = f"{{{NS}}}"
 MATERIALS = {"finger": ("TPU 95A", "#1f77b4"), "mirror": ("TPU 95A", "#1f77b4"),

@@ -3,11 +3,17 @@
 
 from __future__ import annotations
 
+from dataclasses import fields
 from pathlib import Path
 
 import typer
 
 from dbtool.cli.common import guarded
+from dbtool.export.config import ExportConfig
+
+# every default below is ExportConfig's (dbtool/export/config.py imports nothing heavy); only
+# --stl and --3mf differ: neither given means both
+DEFAULT = {f.name: f.default for f in fields(ExportConfig)}
 
 
 def export_command(
@@ -16,22 +22,30 @@ def export_command(
     stl: bool = typer.Option(False, "--stl", help="write binary STL meshes"),
     threemf: bool = typer.Option(False, "--3mf", help="write assembly.3mf (one object per part, "
                                                      "a material each, laid out on a plate)"),
-    channels: bool = typer.Option(True, "--channels/--no-channels",
+    channels: bool = typer.Option(DEFAULT["channels"], "--channels/--no-channels",
                                   help="cut the tendon channels, tube seats and knot pockets"),
-    tendon_diameter: float = typer.Option(0.5, min=0.05, help="tendon line diameter (mm)"),
-    tube_diameter: float = typer.Option(2.0, min=0.1, help="PTFE tube outer diameter (mm)"),
-    clearance: float = typer.Option(0.4, min=0.0, help="added to line and tube diameters (mm)"),
-    channel_diameter: float = typer.Option(None, min=0.1, help="line channel diameter (mm); "
-                                                               "default line + clearance"),
-    bend_radius: float = typer.Option(5.0, min=0.1, help="least bend radius of a channel (mm)"),
-    min_wall: float = typer.Option(1.0, min=0.0, help="material kept around a channel (mm)"),
-    infill: str = typer.Option("none", help="none | voronoi (2.5 mm cells, 0.4 mm beams)"),
-    shell: float = typer.Option(1.2, min=0.1, help="solid skin around the infill (mm)"),
-    scale_mm: float = typer.Option(1000.0, "--scale-mm", min=1e-3,
+    tendon_diameter: float = typer.Option(DEFAULT["tendon_diameter"], min=0.05,
+                                          help="tendon line diameter (mm)"),
+    tube_diameter: float = typer.Option(DEFAULT["tube_diameter"], min=0.1,
+                                        help="PTFE tube outer diameter (mm)"),
+    clearance: float = typer.Option(DEFAULT["clearance"], min=0.0,
+                                    help="added to line and tube diameters (mm)"),
+    channel_diameter: float = typer.Option(DEFAULT["channel_diameter"], min=0.1,
+                                           help="line channel diameter (mm); default line + "
+                                                "clearance"),
+    bend_radius: float = typer.Option(DEFAULT["bend_radius"], min=0.1,
+                                      help="least bend radius of a channel (mm)"),
+    min_wall: float = typer.Option(DEFAULT["min_wall"], min=0.0,
+                                   help="material kept around a channel (mm)"),
+    infill: str = typer.Option(DEFAULT["infill"],
+                               help="none | voronoi (2.5 mm cells, 0.4 mm beams)"),
+    shell: float = typer.Option(DEFAULT["shell"], min=0.1,
+                                help="solid skin around the infill (mm)"),
+    scale_mm: float = typer.Option(DEFAULT["scale_mm"], "--scale-mm", min=1e-3,
                                    help="mm per simulation unit (the finger: 60 x 72.5 x 42.5 mm)"),
-    orient: bool = typer.Option(True, "--orient/--no-orient",
+    orient: bool = typer.Option(DEFAULT["orient"], "--orient/--no-orient",
                                 help="write the parts in their print orientation"),
-    slice_: bool = typer.Option(True, "--slice/--no-slice",
+    slice_: bool = typer.Option(DEFAULT["slice"], "--slice/--no-slice",
                                 help="check every part with PrusaSlicer when it is installed"),
     out: Path = typer.Option(Path("exports"), help="parent folder; writes OUT/<design-name>/"),
 ) -> None:
@@ -40,7 +54,7 @@ def export_command(
     pins and tendon channels; a slicer check, an assembly sheet and a report. With neither
     --stl nor --3mf, writes both."""
     from dbtool.design import Design
-    from dbtool.export.assembly import ExportConfig, export_design
+    from dbtool.export.assembly import export_design
     from dbtool.runs import design_name, find_design
 
     with guarded():

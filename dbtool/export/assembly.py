@@ -3,9 +3,9 @@ routing and a fabrication report, all in millimetres.
 
 Gripping: the designed finger, its mirror copy (``Manifold.mirror``, so winding stays right) about
 the gripper's mirror plane and the rigid base plate with four mounting holes, placed as in the
-simulated gripper; one tendon per actuator group and finger (:mod:`dbtool.export.tendons`),
+simulated gripper; one tendon per actuator group and finger (:mod:`dbtool.export.gripper.tendons`),
 optionally cut as channels. Other tasks: the body and its actuator regions as separate parts.
-The checks and the report are in :mod:`dbtool.export.report`.
+The checks and the report are in :mod:`dbtool.export.reports.report`.
 """
 
 from __future__ import annotations
@@ -17,12 +17,13 @@ import numpy as np
 
 from dbtool.atomic import atomic_folder
 from dbtool.design import Design
-from dbtool.export.config import Assembly, ExportConfig
-from dbtool.export.fields import design_fields
-from dbtool.export.gripper import build_gripper
-from dbtool.export.mesh import OccupancyField, finish, write_stl
-from dbtool.export.report import design_volume, report, report_markdown
-from dbtool.export.threemf import write_3mf
+from dbtool.errors import InputError
+from dbtool.export.config import INFILLS, Assembly, ExportConfig
+from dbtool.export.geometry.fields import design_fields
+from dbtool.export.geometry.mesh import OccupancyField, finish, write_stl
+from dbtool.export.gripper.parts import build_gripper
+from dbtool.export.printing.threemf import write_3mf
+from dbtool.export.reports.report import design_volume, report, report_markdown
 from dbtool.runs import write_json
 from dbtool.sim.tasks import get_task
 
@@ -51,7 +52,7 @@ def build_body(design: Design, cfg: ExportConfig) -> Assembly:
     t1 = time.perf_counter()
     info: dict = {}
     if cfg.infill == "voronoi":
-        from dbtool.export.infill import InfillConfig, voronoi_infill
+        from dbtool.export.geometry.infill import InfillConfig, voronoi_infill
 
         parts["body"], info = voronoi_infill(body, InfillConfig(shell=cfg.shell))
     parts = {k: finish(v) for k, v in parts.items()}
@@ -61,11 +62,11 @@ def build_body(design: Design, cfg: ExportConfig) -> Assembly:
 
 def build(design: Design, cfg: ExportConfig | None = None) -> Assembly:
     cfg = cfg or ExportConfig()
-    if cfg.infill not in ("none", "voronoi"):
-        raise ValueError(f"unknown infill {cfg.infill!r}: choose none or voronoi")
+    if cfg.infill not in INFILLS:  # the config was changed after it was checked
+        raise InputError(f"unknown infill {cfg.infill!r}: choose {' or '.join(INFILLS)}")
     task = get_task(design.task)  # fail early on an unknown task
     if design.robot.n == 0:
-        raise ValueError("the design has no robot fields (points, occupancy, actuators)")
+        raise InputError("the design has no robot fields (points, occupancy, actuators)")
     if task.gripper:
         return build_gripper(design, cfg)
     return build_body(design, cfg)
@@ -95,7 +96,7 @@ def materials(parts: dict) -> dict[str, tuple[str, str]]:
 def poses(asm: Assembly, cfg: ExportConfig) -> dict:
     """Print pose per part (docs/export.md, "Print orientation"): each gripper part its own;
     a body's actuator regions share the body's, so they still tile it."""
-    from dbtool.export.orient import PrintPose, choose_pose
+    from dbtool.export.printing.orient import PrintPose, choose_pose
 
     if not cfg.orient:  # the parts stay in the design's frame
         return {k: PrintPose(np.array([0.0, 0.0, -1.0]), np.eye(4), 0.0, 0.0,
@@ -116,8 +117,8 @@ def export_design(design: Design, out_dir: Path, cfg: ExportConfig | None = None
     Everything is written into a hidden sibling folder first and renamed into place at the end,
     so an interrupted export never leaves a folder that looks complete.
     """
-    from dbtool.export.orient import apply_pose
-    from dbtool.export.threemf import plate_layout
+    from dbtool.export.printing.orient import apply_pose
+    from dbtool.export.printing.threemf import plate_layout
 
     cfg = cfg or ExportConfig()
     out_dir = Path(out_dir)
@@ -162,7 +163,7 @@ def export_design(design: Design, out_dir: Path, cfg: ExportConfig | None = None
 def _slice(posed: dict, mats: dict, tmp: Path, cfg: ExportConfig) -> dict:
     """PrusaSlicer's verdict on each printable part (docs/export.md, "Printability"), or why
     there is none."""
-    from dbtool.export.slicer import find_slicer, slice_parts
+    from dbtool.export.printing.slicer import find_slicer, slice_parts
 
     if not cfg.slice:
         return {"skipped": "--no-slice"}
@@ -185,8 +186,8 @@ def _slice(posed: dict, mats: dict, tmp: Path, cfg: ExportConfig) -> dict:
 def _gripper_files(design: Design, asm: Assembly, cfg: ExportConfig, rep: dict, tmp: Path,
                    name: str) -> None:
     """``tendons.json``, ``tendons.png``, ``assembly.md`` and ``exploded.png``."""
-    from dbtool.export.drawing import draw_tendons
-    from dbtool.export.sheet import draw_exploded, write_assembly_md
+    from dbtool.export.reports.drawing import draw_tendons
+    from dbtool.export.reports.sheet import draw_exploded, write_assembly_md
 
     tj = {"units": "mm", "frame": "gripper workspace, y up, base on top",
           "channel_diameter_mm": cfg.line_channel, "tube_seat_diameter_mm": 2 * cfg.seat_radius,
@@ -201,7 +202,8 @@ def _gripper_files(design: Design, asm: Assembly, cfg: ExportConfig, rep: dict, 
 
 
 def assembly_sheet(asm: Assembly, cfg: ExportConfig, rep: dict, name: str) -> dict:
-    """What the assembly sheet needs (:mod:`dbtool.export.sheet`), from an export's report."""
+    """What the assembly sheet needs (:mod:`dbtool.export.reports.sheet`), from an export's
+    report."""
     mats = materials(asm.parts)
     sliced = rep.get("slicer", {})
     prints = {}

@@ -1,13 +1,16 @@
 """The settings of an export (:class:`ExportConfig`) and what a build returns
-(:class:`Assembly`)."""
+(:class:`Assembly`).
+
+It imports nothing heavy, so the command line reads its defaults from :class:`ExportConfig`
+without loading the exporter."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from dbtool.export.mesh import MM_PER_UNIT
-from dbtool.export.tendons import Tendon
+from dbtool.errors import InputError
 
+MM_PER_UNIT = 1000.0  # a gripper finger (0.06 x 0.0725 x 0.0425) becomes a 60 x 72.5 x 42.5 mm part
 INFILLS = ("none", "voronoi")  # what fills the finger inside its skin
 
 
@@ -41,13 +44,13 @@ class ExportConfig:
 
     def __post_init__(self) -> None:
         if self.infill not in INFILLS:
-            raise ValueError(f"unknown infill {self.infill!r}: choose {' or '.join(INFILLS)}")
+            raise InputError(f"unknown infill {self.infill!r}: choose {' or '.join(INFILLS)}")
         for name in ("tendon_diameter", "tube_diameter", "bend_radius", "knot_pocket",
                      "pin_diameter", "mount_hole", "scale_mm"):
             if not getattr(self, name) > 0:
-                raise ValueError(f"{name.replace('_', '-')} must be positive")
+                raise InputError(f"{name.replace('_', '-')} must be positive")
         if self.clearance < 0 or self.min_wall < 0:
-            raise ValueError("clearance and min-wall must not be negative")
+            raise InputError("clearance and min-wall must not be negative")
 
     @property
     def line_channel(self) -> float:
@@ -55,7 +58,8 @@ class ExportConfig:
         return self.channel_diameter or self.tendon_diameter + self.clearance
 
     @property
-    def radius(self) -> float:
+    def channel_radius(self) -> float:
+        """Radius of the line's channel."""
         return 0.5 * self.line_channel
 
     @property
@@ -70,7 +74,7 @@ class Assembly:
 
     parts: dict  # name -> manifold (mm), printable parts only
     union: object  # all parts fused (one body for the gripper)
-    tendons: list[Tendon]
+    tendons: list  # the Tendon of each channel (dbtool.export.gripper.tendons)
     design_volume_mm3: float  # the largest connected piece of the design (what is meshed)
     body_volume_mm3: float  # the meshed body before channels and infill
     timings: dict

@@ -127,7 +127,7 @@ def report(design: Design, asm: Assembly, cfg: ExportConfig, name: str, files: l
         ts = asm.tendons
         rep["tendons"] = {
             "count": len(ts), "points_per_tendon": len(ts[0].points),
-            "channel_diameter_mm": cfg.line_channel, "channel_radius_mm": cfg.radius,
+            "channel_diameter_mm": cfg.line_channel, "channel_radius_mm": cfg.channel_radius,
             "tube_seat_diameter_mm": 2 * cfg.seat_radius, "min_wall_mm": cfg.min_wall,
             "bend_radius_mm": cfg.bend_radius,
             "min_point_depth_mm": min(min(t.depth_mm) for t in ts),
@@ -164,6 +164,18 @@ def report(design: Design, asm: Assembly, cfg: ExportConfig, name: str, files: l
 
 def report_markdown(rep: dict) -> str:
     """A short human-readable ``report.md``."""
+    lines = _parts_lines(rep) + _volume_lines(rep) + _tendon_lines(rep) + _mounting_lines(rep)
+    lines += _print_lines(rep)
+    if "infill" in rep:
+        i = rep["infill"]
+        lines += ["", f"Voronoi infill: relative density {i['relative_density']:.3f} "
+                      f"(seed spacing {i['spacing_mm']} mm, beams {i['beam_mm']} mm, shell "
+                      f"{i['shell_mm']} mm), built in {i['seconds']:.1f} s."]
+    return "\n".join(lines) + "\n"
+
+
+def _parts_lines(rep: dict) -> list[str]:
+    """The report's title and its table of parts."""
     lines = [f"# Fabrication report: {rep['design']}", "",
              f"Task {rep['task']}; units mm ({rep['mm_per_sim_unit']:g} mm per simulation unit).",
              "", "| part | watertight | volume | bodies | genus | volume (mm³) | "
@@ -174,6 +186,12 @@ def report_markdown(rep: dict) -> str:
         box = " × ".join(f"{v:.1f}" for v in p["bbox_mm"])
         lines.append(f"| {k} | {p['watertight']} | {p['is_volume']} | {p['bodies']} | "
                      f"{p['genus']} | {p['volume_mm3']:.0f} | {box} | {wall} |")
+    return lines
+
+
+def _volume_lines(rep: dict) -> list[str]:
+    """The volume check, what the root needed and the surface's staircase."""
+    lines: list[str] = []
     v = rep["volume_check"]
     fill = rep.get("root_pillar_fill_mm3", 0.0)
     plus = f" plus {fill:.0f} mm³ of root cells the pillars fill" if fill > 0 else ""
@@ -200,6 +218,12 @@ def report_markdown(rep: dict) -> str:
         lines += ["", f"Surface: {st['sharp_edges_mm_per_100mm2']:.2f} mm of edges turning more "
                       f"than {st['angle_deg']:g}° per 100 mm² of the {st['part']}'s surface (the "
                       "lattice's staircase; cut faces not counted)."]
+    return lines
+
+
+def _tendon_lines(rep: dict) -> list[str]:
+    """The tendons: routes, channels, walls, bends and their verdict."""
+    lines: list[str] = []
     if "tendons" in rep:
         t = rep["tendons"]
         verdict = "all clear" if t["all_ok"] else "**FAILING: " + "; ".join(
@@ -218,6 +242,12 @@ def report_markdown(rep: dict) -> str:
                       f"{', '.join(f'{v:g}' for v in t['pocket_mm'].values())} mm); {verdict}. "
                       "Channels cut: "
                       f"{rep['config']['channels']}."]
+    return lines
+
+
+def _mounting_lines(rep: dict) -> list[str]:
+    """The mounting holes and the alignment pins."""
+    lines: list[str] = []
     if "mounting" in rep:
         m = rep["mounting"]
         holes = ", ".join(f"({x:.1f}, {z:.1f})" for x, z in m["holes"])
@@ -225,6 +255,12 @@ def report_markdown(rep: dict) -> str:
                       f"{holes}; no finger within {m['keepout_mm']:.1f} mm of a hole's axis: "
                       f"{m['holes_clear']}. Alignment pins per finger: {len(m['pins'])} "
                       f"(Ø{m['pin_diameter_mm']:g} × {m['pin_length_mm']:g} mm)."]
+    return lines
+
+
+def _print_lines(rep: dict) -> list[str]:
+    """Each part's print pose and PrusaSlicer's verdict."""
+    lines: list[str] = []
     poses = [(k, p["print_pose"]) for k, p in rep["parts"].items() if "print_pose" in p]
     if poses:
         lines += ["", "| part | material | print: down | height (mm) | overhang (mm²) |",
@@ -245,9 +281,4 @@ def report_markdown(rep: dict) -> str:
                          f"{r['print_time_s'] / 3600:.2f} | {r['filament_g']:.1f} | "
                          f"{r['support_mm']:.0f} |")
             lines += [f"  - {msg}" for msg in r["messages"]]
-    if "infill" in rep:
-        i = rep["infill"]
-        lines += ["", f"Voronoi infill: relative density {i['relative_density']:.3f} "
-                      f"(seed spacing {i['spacing_mm']} mm, beams {i['beam_mm']} mm, shell "
-                      f"{i['shell_mm']} mm), built in {i['seconds']:.1f} s."]
-    return "\n".join(lines) + "\n"
+    return lines

@@ -5,17 +5,17 @@ spacing 2.5 mm, beam thickness 0.4 mm) to soften them. :func:`voronoi_infill` re
 a solid skin (``shell`` mm thick) around such a foam and returns one watertight manifold:
 
 1. The inner region (the part eroded by ``shell``) is the ``shell`` level set, meshed by
-   marching tetrahedra (:mod:`dbtool.export.isosurface`), of a signed distance field: the part
-   is voxelised slice by slice (:mod:`dbtool.export.voxels`: winding numbers of its
-   cross-sections, no ray casting) and
+   marching tetrahedra (:mod:`dbtool.export.geometry.isosurface`), of a signed distance field:
+   the part is voxelised slice by slice (:mod:`dbtool.export.geometry.voxels`: winding numbers
+   of its cross-sections, no ray casting) and
    ``scipy.ndimage.distance_transform_edt`` gives the distance. skin = part - inner region.
 2. Seeds on a body-centred cubic grid jittered by +-10 % of its cell (one seed per
    ``spacing**3``, reproducible from ``seed``; a near-Kelvin foam with few very short edges).
    The finite edges of their ``scipy.spatial.Voronoi`` diagram with an end (or the middle) in
    the slightly enlarged inner region become the beams; edges under 1.25 beam diameters are
    contracted (their ends merged).
-3. The lattice (:mod:`dbtool.export.lattice`): each beam is a prism of ``segments`` facets
-   whose width across flats is ``beam`` (no section is thinner), each Voronoi vertex a node,
+3. The lattice (:mod:`dbtool.export.geometry.lattice`): each beam is a prism of ``segments``
+   facets whose width across flats is ``beam`` (no section is thinner), each Voronoi vertex a node,
    the convex hull of its beams' end rings. Most of the foam is stitched into one mesh with no
    boolean at all; the rest (tangled joints, pieces near the skin) are groups of disjoint
    pieces united by ``Manifold.batch_boolean``.
@@ -37,10 +37,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dbtool.errors import InputError
 from dbtool.export._manifold import from_arrays, mesh_arrays
 from dbtool.export._manifold import manifold3d as m3
-from dbtool.export.isosurface import marching_tetrahedra
-from dbtool.export.lattice import (
+from dbtool.export.geometry.isosurface import marching_tetrahedra
+from dbtool.export.geometry.lattice import (
     EPS,
     Lattice,
     foam_pieces,
@@ -48,7 +49,7 @@ from dbtool.export.lattice import (
     sample_segments,
     segment_distance,
 )
-from dbtool.export.voxels import Voxels
+from dbtool.export.geometry.voxels import Voxels
 
 _JITTER = 0.1  # seed displacement, fraction of the body-centred cubic cell (each axis, +-)
 
@@ -209,49 +210,32 @@ def _clean(body, cavity: float):
 
 def _check(solid, cfg: InfillConfig) -> None:
     if not (cfg.spacing > 0 and math.isfinite(cfg.spacing)):
-        raise ValueError(f"infill spacing must be a positive number of mm, got {cfg.spacing}")
+        raise InputError(f"infill spacing must be a positive number of mm, got {cfg.spacing}")
     if not (cfg.beam > 0 and math.isfinite(cfg.beam)):
-        raise ValueError(f"infill beam diameter must be a positive number of mm, got {cfg.beam}")
+        raise InputError(f"infill beam diameter must be a positive number of mm, got {cfg.beam}")
     if cfg.beam >= 0.5 * cfg.spacing:
-        raise ValueError(f"infill beam ({cfg.beam} mm) must be under half the seed spacing "
+        raise InputError(f"infill beam ({cfg.beam} mm) must be under half the seed spacing "
                          f"({cfg.spacing} mm)")
     if not (cfg.shell > 0 and math.isfinite(cfg.shell)):
-        raise ValueError(f"infill shell must be a positive thickness in mm, got {cfg.shell}")
+        raise InputError(f"infill shell must be a positive thickness in mm, got {cfg.shell}")
     if not (cfg.drain >= 0 and math.isfinite(cfg.drain)):
-        raise ValueError(f"infill drain must be a diameter >= 0 mm, got {cfg.drain}")
+        raise InputError(f"infill drain must be a diameter >= 0 mm, got {cfg.drain}")
     if int(cfg.segments) < 3:
-        raise ValueError(f"infill beams need at least 3 segments, got {cfg.segments}")
+        raise InputError(f"infill beams need at least 3 segments, got {cfg.segments}")
     if solid is None or solid.is_empty() or solid.volume() <= 0:
-        raise ValueError("infill: the solid is empty")
+        raise InputError("infill: the solid is empty")
     if len(solid.decompose()) != 1:
-        raise ValueError("infill: the solid must be one connected body")
+        raise InputError("infill: the solid must be one connected body")
 
 
-def _thin(cfg: InfillConfig) -> ValueError:
-    return ValueError(f"infill: the part is thinner than 2 x shell ({2 * cfg.shell:g} mm), "
+def _thin(cfg: InfillConfig) -> InputError:
+    return InputError(f"infill: the part is thinner than 2 x shell ({2 * cfg.shell:g} mm), "
                       "no room for foam")
 
 
-def voronoi_infill(solid, cfg: InfillConfig | None = None) -> tuple[object, dict]:
-    """Replace the inside of ``solid`` (a ``manifold3d.Manifold`` in mm) by a Voronoi lattice
-    foam (docs/method.md §8 / appendix G: seed spacing 2.5 mm, beams 0.4 mm) inside a skin of
-    thickness ``cfg.shell``; returns (one watertight body, info).
-
-    info: relative_density (result / solid volume), foam_relative_density (foam volume in the
-    inner region / its volume), shell_fraction (skin / solid volume), seeds (in the foam
-    region), beams, nodes, stitched (share of beams joined without booleans), surfaces (1, or 2
-    for a sealed skin: outer and cavity surfaces), shell_mm, spacing_mm, beam_mm, drain_mm,
-    seconds, volume_mm3. Raises ValueError on an empty solid,
-    bad settings, or a part thinner than 2 x shell (no room for foam).
-    """
-    cfg = InfillConfig() if cfg is None else cfg
-    t0 = time.perf_counter()
-    _check(solid, cfg)
-    seg = int(cfg.segments)
-    r = 0.5 * cfg.beam
-
-    # 1. skin, inner region, drain hole
-    pitch = min(cfg.shell / 3.0, 0.5)
+def _skin(solid, cfg: InfillConfig, pitch: float) -> tuple:
+    """Stage 1 of :func:`voronoi_infill`: the part's distance field, the inner region, the skin
+    (drained), what the foam is clipped to, and the drain hole's axis (or None)."""
     field = _distance_field(solid, pitch)
     if field.sdf.max() <= cfg.shell + 0.5 * pitch:
         raise _thin(cfg)
@@ -263,9 +247,12 @@ def voronoi_infill(solid, cfg: InfillConfig | None = None) -> tuple[object, dict
     if cfg.drain > 0:
         cyl, hole = _drain_hole(inner, field, cfg.drain, cfg.beam + pitch)
         shell, keep_in = shell - cyl, solid - cyl
-    solid_vol, inner_vol, shell_vol = solid.volume(), inner.volume(), shell.volume()
+    return field, inner, shell, keep_in, hole
 
-    # 2. seeds and the Voronoi edges near the inner region
+
+def _foam_lattice(inner, field: _Field, cfg: InfillConfig, r: float, seg: int) -> tuple:
+    """Stage 2 of :func:`voronoi_infill`: the seeds, and the lattice of the Voronoi edges near
+    the inner region (its nodes, edges and :class:`Lattice`)."""
     box = np.asarray(inner.bounding_box(), float)
     seeds = _seeds(box[:3], box[3:], cfg.spacing, np.random.default_rng(cfg.seed))
     verts, edges = _voronoi_edges(seeds)
@@ -277,10 +264,13 @@ def voronoi_infill(solid, cfg: InfillConfig | None = None) -> tuple[object, dict
         raise _thin(cfg)
     nodes, e = _contract_short(verts, edges[keep], 2.5 * r)
     lat = Lattice.build(nodes, e, r, seg)
-    nn, ne = len(nodes), len(e)
+    return seeds, nodes, e, lat
 
-    # 3. pieces that may leave the part (or enter the drain) are clipped by a boolean
-    step = r
+
+def _safe(lat: Lattice, nodes: np.ndarray, ne: int, field: _Field, hole, cfg: InfillConfig,
+          step: float, pitch: float) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 3 of :func:`voronoi_infill`: the beams and the nodes that stay inside the part and
+    clear of the drain hole (the others are clipped by a boolean)."""
     pts, owner = sample_segments(lat.seg_a, lat.seg_b, step)
     margin = 1.5 * pitch + 0.5 * step + EPS  # the field's error plus the sampling gap
     low = np.full(ne, np.inf)
@@ -298,6 +288,39 @@ def voronoi_infill(solid, cfg: InfillConfig | None = None) -> tuple[object, dict
         d = segment_distance(nodes, nodes, np.broadcast_to(ha, nodes.shape),
                              np.broadcast_to(hb, nodes.shape))
         node_safe &= d >= reach + lat.rho
+    return beam_safe, node_safe
+
+
+def voronoi_infill(solid, cfg: InfillConfig | None = None) -> tuple[object, dict]:
+    """Replace the inside of ``solid`` (a ``manifold3d.Manifold`` in mm) by a Voronoi lattice
+    foam (docs/method.md §8 / appendix G: seed spacing 2.5 mm, beams 0.4 mm) inside a skin of
+    thickness ``cfg.shell``; returns (one watertight body, info).
+
+    info: relative_density (result / solid volume), foam_relative_density (foam volume in the
+    inner region / its volume), shell_fraction (skin / solid volume), seeds (in the foam
+    region), beams, nodes, stitched (share of beams joined without booleans), surfaces (1, or 2
+    for a sealed skin: outer and cavity surfaces), shell_mm, spacing_mm, beam_mm, drain_mm,
+    seconds, volume_mm3. Raises InputError (a ValueError) on an empty solid,
+    bad settings, or a part thinner than 2 x shell (no room for foam).
+    """
+    cfg = InfillConfig() if cfg is None else cfg
+    t0 = time.perf_counter()
+    _check(solid, cfg)
+    seg = int(cfg.segments)
+    r = 0.5 * cfg.beam
+
+    # 1. skin, inner region, drain hole
+    pitch = min(cfg.shell / 3.0, 0.5)
+    field, inner, shell, keep_in, hole = _skin(solid, cfg, pitch)
+    solid_vol, inner_vol, shell_vol = solid.volume(), inner.volume(), shell.volume()
+
+    # 2. seeds and the Voronoi edges near the inner region
+    seeds, nodes, e, lat = _foam_lattice(inner, field, cfg, r, seg)
+    nn, ne = len(nodes), len(e)
+
+    # 3. pieces that may leave the part (or enter the drain) are clipped by a boolean
+    step = r
+    beam_safe, node_safe = _safe(lat, nodes, ne, field, hole, cfg, step, pitch)
 
     # 4. stitch what is clean into one mesh: node hulls whose rings are all faces, beams whose
     #    ends replace those faces; everything else is fused by booleans (groups of disjoint

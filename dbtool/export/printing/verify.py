@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from dbtool.export._manifold import manifold3d as m3
-from dbtool.export.channel_path import fillet
-from dbtool.export.channels import along_axis
+from dbtool.export.gripper.channel_path import fillet
+from dbtool.export.gripper.channels import along_axis
 
 PROBE = 0.05  # mm: radius of the probe balls
 WALL_SLACK = 0.05  # mm: the tubes' polygons against the exact wall
@@ -128,7 +128,7 @@ def verify_export(folder: Path, slice_flex: bool = False) -> dict:
     out["base_flat"] = out["parts"]["base"]["height_mm"] <= (
         rep["parts"]["base"]["bbox_mm"][1] + 1e-3) and out["parts"]["base"]["height_mm"] < 15.0
     if slice_flex:
-        from dbtool.export.slicer import slice_part
+        from dbtool.export.printing.slicer import slice_part
 
         out["slicer_flex"] = {n: slice_part(folder / f"{n}.stl", "flex").as_json()
                               for n in names}

@@ -108,7 +108,7 @@ def model_xml(parts: dict, materials: dict | None = None, transforms: dict | Non
 def plate_layout(solids: dict, gap: float = 10.0) -> dict[str, np.ndarray]:
     """4x4 translations that put the parts in a row along x on one plate, in the order given:
     each part's bounding box starts ``gap`` mm after the previous one's, at y = 0 and z = 0
-    (parts posed by :func:`dbtool.export.orient.apply_pose` already rest on z = 0)."""
+    (parts posed by :func:`dbtool.export.printing.orient.apply_pose` already rest on z = 0)."""
     out: dict[str, np.ndarray] = {}
     x = 0.0
     for name, solid in solids.items():

@@ -2,15 +2,15 @@
 
 Each tendon's centreline runs from the top of the base (where its PTFE tube sits in a seat bored
 into the base) straight down to the finger's root face, through the four routing points of
-:mod:`dbtool.export.tendons`, and on from the anchor to the finger's surface, where the line's
-knot sits in a pocket. Every corner is rounded to at least the bend radius
-(:func:`dbtool.export.channel_path.fillet`). The wall is measured exactly along the whole path
-inside the finger, every 0.5 mm: the distance from the centreline to the surface of the finger
-with everything else cut from it (the other channels, the pin pockets; of the glued root face,
-all but the channel's own mouth), less the channel's radius. A path that keeps less than the
-minimum is re-routed (the straightest run within 2.5 mm of the largest moment arm, then the
-deepest routing points, then a straight run from the root face to the deepest route's anchor);
-if no route keeps it, the tendon is reported as failing with where and by how much.
+:mod:`dbtool.export.gripper.tendons`, and on from the anchor to the finger's surface, where the
+line's knot sits in a pocket. Every corner is rounded to at least the bend radius
+(:func:`dbtool.export.gripper.channel_path.fillet`). The wall is measured exactly along the
+whole path inside the finger, every 0.5 mm: the distance from the centreline to the surface of
+the finger with everything else cut from it (the other channels, the pin pockets; of the glued
+root face, all but the channel's own mouth), less the channel's radius. A path that keeps less
+than the minimum is re-routed (the straightest run within 2.5 mm of the largest moment arm, then
+the deepest routing points, then a straight run from the root face to the deepest route's
+anchor); if no route keeps it, the tendon is reported as failing with where and by how much.
 """
 
 from __future__ import annotations
@@ -18,10 +18,10 @@ from __future__ import annotations
 import numpy as np
 
 from dbtool.export._manifold import manifold3d as m3
-from dbtool.export.channel_path import SurfaceDistance, fillet, wall_along
 from dbtool.export.config import ExportConfig
-from dbtool.export.tendons import ROLES, Tendon, root_entry, routing_points
-from dbtool.export.voxels import Voxels
+from dbtool.export.geometry.voxels import Voxels
+from dbtool.export.gripper.channel_path import SurfaceDistance, fillet, wall_along
+from dbtool.export.gripper.tendons import ROLES, Tendon, root_entry, routing_points
 
 STEP = 0.5  # mm between the wall's samples along a path
 ROUTES = ("moment", "straight", "depth", "direct")  # routing preferences tried in turn
@@ -97,14 +97,15 @@ def plan(vox: Voxels, depth: np.ndarray, regions: dict, finger, cfg: ExportConfi
     """The tendons of one finger for one routing preference (no wall check yet). ``direct``
     takes the deepest route's anchor and runs straight to it from the root face, the routing
     points spread over the run's second half (no bend between them)."""
-    need = cfg.radius + cfg.min_wall + 0.5 * vox.pitch  # half a voxel of margin for the fillets
+    # half a voxel of margin for the fillets
+    need = cfg.channel_radius + cfg.min_wall + 0.5 * vox.pitch
     routes = routing_points(vox, depth, regions, need, side_sign,
                             "depth" if prefer == "direct" else prefer,
-                            sep=2 * cfg.radius + cfg.min_wall + vox.pitch)
+                            sep=2 * cfg.channel_radius + cfg.min_wall + vox.pitch)
     out, entries, runs = [], [], []
     # entries keep two channels and a wall apart, and two tube seats 0.4 mm (the seats are in
     # the rigid base; a narrow root has no room for more)
-    sep = max(2 * cfg.radius + cfg.min_wall + 0.5, 2 * cfg.seat_radius + SEAT_WALL)
+    sep = max(2 * cfg.channel_radius + cfg.min_wall + 0.5, 2 * cfg.seat_radius + SEAT_WALL)
     for g, (pts, depths, ok) in routes.items():
         target = pts[-1] if prefer == "direct" else pts[0]
         x, z = root_entry(vox, depth, root_mm, target, need, entries, sep, runs)
@@ -171,9 +172,10 @@ def check(tendons: list[Tendon], finger, cfg: ExportConfig, root_mm: float,
         inside &= samples[:, 1] <= root_mm - 1e-6
         pts = samples[inside]
         # the glued root face counts as surface too, but for the channel's own mouth
-        mouth = cfg.radius + cfg.min_wall + 1.0
-        wall = wall_along(pts, SurfaceDistance(solid, exclude=_root_face(root_mm)), cfg.radius)
-        wall = np.minimum(wall, _to_glue_face(pts, root_mm, t.entry, mouth) - cfg.radius)
+        mouth = cfg.channel_radius + cfg.min_wall + 1.0
+        wall = wall_along(pts, SurfaceDistance(solid, exclude=_root_face(root_mm)),
+                          cfg.channel_radius)
+        wall = np.minimum(wall, _to_glue_face(pts, root_mm, t.entry, mouth) - cfg.channel_radius)
         finite = path.radii[np.isfinite(path.radii)]
         t.bend_radii_mm = [round(float(r), 3) for r in finite]
         t.min_bend_radius_mm = round(float(finite.min()), 3) if len(finite) else None
@@ -250,7 +252,7 @@ def centreline(t: Tendon, cfg: ExportConfig) -> np.ndarray:
 
 def finger_cut(t: Tendon, cfg: ExportConfig, root_mm: float):
     """What is cut from the finger for ``t``: the line's channel and the knot pocket."""
-    line = _tube(centreline(t, cfg), cfg.radius)
+    line = _tube(centreline(t, cfg), cfg.channel_radius)
     # the pocket is a counterbore square to the surface, so its rim is a clean edge (a pocket
     # along an oblique line would leave a feather edge where it breaks out)
     tip = np.array(t.tip)
@@ -258,14 +260,14 @@ def finger_cut(t: Tendon, cfg: ExportConfig, root_mm: float):
     if t.pocket_mm:
         pocket = _pocket(d, tip, 0.5 * t.pocket_mm, -1.0, cfg.knot_depth)
     else:  # no room for a knot pocket: a shallow counterbore still squares the mouth
-        pocket = _pocket(d, tip, cfg.radius + 0.5, -1.0, 1.0)
+        pocket = _pocket(d, tip, cfg.channel_radius + 0.5, -1.0, 1.0)
     return line + pocket
 
 
 def base_cut(t: Tendon, cfg: ExportConfig, top_mm: float, root_mm: float):
     """What is cut from the base for ``t``: the tube's seat from the top down to 1.5 mm above
     the root face (a shoulder the tube stops on) and the line's channel through the rest."""
-    line = _tube(centreline(t, cfg), cfg.radius)
+    line = _tube(centreline(t, cfg), cfg.channel_radius)
     r = cfg.seat_radius
     depth = top_mm - root_mm - 1.5
     seat = m3.Manifold.cylinder(depth + 1.0, r, r, 32).rotate([-90.0, 0.0, 0.0])

@@ -1,5 +1,5 @@
 """Beams and nodes of the Voronoi lattice foam as manifold3d meshes (used by
-:mod:`dbtool.export.infill`; docs/method.md §8).
+:mod:`dbtool.export.geometry.infill`; docs/method.md §8).
 
 The interface: :class:`Lattice` (``Lattice.build``), :func:`foam_pieces`, and the geometry
 helpers :func:`frames`, :func:`segment_distance`, :func:`sample_segments` and ``EPS``.

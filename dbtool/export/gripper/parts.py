@@ -4,8 +4,8 @@ the rigid base plate, placed as in the simulated gripper.
 
 The base carries four M3 mounting holes where no finger covers them, a seat for each tendon's
 PTFE tube and the alignment pins that locate each finger in the pockets of its root face; each
-finger carries its tendons' channels (:mod:`dbtool.export.channels`) with a knot pocket at the
-fingertip.
+finger carries its tendons' channels (:mod:`dbtool.export.gripper.channels`) with a knot pocket
+at the fingertip.
 """
 
 from __future__ import annotations
@@ -16,15 +16,15 @@ import numpy as np
 
 from dbtool.design import Design
 from dbtool.export._manifold import manifold3d as m3
-from dbtool.export.channels import base_cut, finger_cut, route_finger
-from dbtool.export.channels import check as check_walls
 from dbtool.export.config import Assembly, ExportConfig
-from dbtool.export.fields import design_fields
-from dbtool.export.mesh import finish, largest_component
-from dbtool.export.mounting import alignment_pins, hole_clearance, mount_holes, pin_solids
-from dbtool.export.report import design_volume
-from dbtool.export.tendons import mirror_tendon
-from dbtool.export.voxels import Voxels
+from dbtool.export.geometry.fields import design_fields
+from dbtool.export.geometry.mesh import finish, largest_component
+from dbtool.export.geometry.voxels import Voxels
+from dbtool.export.gripper.channels import base_cut, finger_cut, route_finger
+from dbtool.export.gripper.channels import check as check_walls
+from dbtool.export.gripper.mounting import alignment_pins, hole_clearance, mount_holes, pin_solids
+from dbtool.export.gripper.tendons import mirror_tendon
+from dbtool.export.reports.report import design_volume
 from dbtool.sim.tasks.base import DX, SPACING
 from dbtool.sim.tasks.gripping import BASE, FULL
 
@@ -70,7 +70,7 @@ def _pillar_fill(design: Design, scale: float, boxes: np.ndarray | None, top: fl
 
 def _near_root(t, cfg: ExportConfig, root: float, depth: float) -> np.ndarray:
     """Points (every 0.25 mm) of ``t``'s centreline within ``depth`` below the root face."""
-    from dbtool.export.channel_path import fillet
+    from dbtool.export.gripper.channel_path import fillet
 
     path = fillet(t.corners(), cfg.bend_radius).sample(0.25)
     return path[(path[:, 1] <= root + 1e-6) & (path[:, 1] >= root - depth)]
@@ -109,87 +109,26 @@ def reach_root(finger, root: float, depth: float = 1.5) -> tuple[object, float]:
 def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
     s = cfg.scale_mm
     t0 = time.perf_counter()
-    body, regions, gap = design_fields(design, s, extrude_top=3)
     root, top = (FULL[1] - BASE) * s, FULL[1] * s  # the base's lower and upper faces
-    # the finger stays INSET inside its workspace's sides: a finger face nearly coplanar with
-    # the base's side face leaves edges of 1e-6 mm in the fused assembly (an STL cannot keep them)
-    ws = np.array([[INSET, -1.0, INSET], [FULL[0] * s - INSET, root + 2.0, FULL[2] * s - INSET]])
-    pillars = _root_pillars(design, s, root)
-    finger = body.solid(keep_largest=False, boxes=pillars, clip=ws)
-    finger = finger.trim_by_plane([0.0, -1.0, 0.0], -root)  # keep y <= root
-    finger, short = reach_root(largest_component(finger), root)
+    finger, regions, pillars, gap, short = _finger(design, s, root)
     plane = FULL[2] / 2 * s  # the finger lies in z < plane, its mirror in z > plane
     t_mesh = time.perf_counter()
-    vox = Voxels.of(finger, cfg.pitch)
-    tendons = route_finger(finger, regions, cfg, "finger", top, root, SIDES, voxels=vox)
-    # alignment pins in the root face, clear of the channels where they run within a pocket's
-    # depth (and a wall) of it; the walls are measured again with the pockets cut
-    avoid = [(x, z, cfg.radius) for t in tendons
-             for x, _, z in _near_root(t, cfg, root, cfg.pin_length + 0.5 + cfg.min_wall
-                                       + cfg.radius + 0.5 * cfg.pin_diameter)]
-    pins = alignment_pins(finger, root, cfg.pin_diameter, cfg.pin_clearance, cfg.min_wall, avoid)
-    pin_base, pockets = pin_solids(pins, root, cfg.pin_diameter, cfg.pin_length,
-                                   cfg.pin_clearance)
-    if pins:
-        check_walls(tendons, finger, cfg, root, pockets)
-    tendons += [mirror_tendon(t, plane, "finger_mirror") for t in tendons]
+    tendons, pins, pin_base, pockets = _route(finger, regions, cfg, top, root, plane)
     t_route = time.perf_counter()
-    # the volume check compares the part of the finger the design holds (below its top sites)
-    design_top = (design.robot.points[design.robot.active(), 1].max() + SPACING / 2) * s
-    body_volume = finger.trim_by_plane([0.0, -1.0, 0.0], -design_top).volume()
-    fill = _pillar_fill(design, s, pillars, design_top)
-    bridge = finger.volume() - body_volume
+    body_volume, fill, bridge = _volumes(design, finger, s, pillars)
     solid_finger = finger
     own = [t for t in tendons if t.finger == "finger"]
-    info: dict = {}
-    if cfg.infill == "voronoi":
-        from dbtool.export.channels import _tube, centreline
-        from dbtool.export.infill import InfillConfig, voronoi_infill
-
-        foam, info = voronoi_infill(finger, InfillConfig(shell=cfg.shell))
-        # solid sleeves keep each channel and pin pocket a closed hole through the foam
-        sleeves = [_tube(centreline(t, cfg), cfg.radius + cfg.min_wall) for t in own
-                   if cfg.channels]
-        if pins:
-            sleeves += [pin_solids(pins, root, cfg.pin_diameter + 2 * cfg.min_wall,
-                                   cfg.pin_length, cfg.pin_clearance)[1]]
-        if sleeves:
-            foam = foam + (_union(sleeves) ^ finger)
-        finger = foam
+    finger, info = _infill(finger, own, pins, cfg, root)
     t_infill = time.perf_counter()
-    # the mounting holes: where neither finger's shadow nor a tube seat is in the way
-    seats = [(t.exit[0], t.exit[2], cfg.seat_radius) for t in tendons]
-    mirrored = _mirror(solid_finger, plane)
-    mounting = mount_holes([solid_finger, mirrored], (0.0, 0.0, FULL[0] * s, FULL[2] * s),
-                           root, cfg.mount_hole, cfg.screw_head, avoid=seats, mirror_z=plane)
-    mounting["clearance_mm3"] = [round(v, 3) for v in hole_clearance(
-        [solid_finger, mirrored], mounting["holes"], 0.5 * cfg.screw_head, root)]
-    mounting["pins"] = [[round(float(x), 3), round(float(z), 3)] for x, z in pins]
-    mounting["pins_mirror"] = [[x, round(2 * plane - z, 3)] for x, z in mounting["pins"]]
-    mounting["pin_diameter_mm"] = cfg.pin_diameter
-    mounting["pin_length_mm"] = cfg.pin_length
-    r = 0.5 * cfg.mount_hole
-    holes = []
-    for x, z in mounting["holes"]:
-        hole = m3.Manifold.cylinder(BASE * s + 2.0, r, r, 24)
-        holes.append(hole.rotate([-90.0, 0.0, 0.0]).translate([x, root - 1.0, z]))
-    cut = _union(holes)
+    mounting = _mounting(solid_finger, tendons, pins, cfg, s, root, plane)
+    cut = _hole_cut(mounting["holes"], cfg, s, root)
     if cfg.channels:  # cut the designed finger; its mirror copy stays its exact reflection
         tubes = _union([finger_cut(t, cfg, root) for t in own])
         finger = finger - tubes
         cut = cut + _union([base_cut(t, cfg, top, root) for t in tendons])
     plain = finish(finger)  # without pin pockets: the fused assembly fills them with the pins
     finger = finish(finger - pockets) if pins else plain
-    base = m3.Manifold.cube([FULL[0] * s, BASE * s, FULL[2] * s]).translate([0.0, root, 0.0])
-    # the fingers only touch the plate's lower face; in the fused assembly the plate reaches
-    # GLUE lower so fingers and plate overlap and join into one body (one box, cut once: a
-    # separate glue slab shares the holes' walls with the plate, which leaves slivers)
-    plate = m3.Manifold.cube([FULL[0] * s, BASE * s + GLUE, FULL[2] * s])
-    plate = finish(plate.translate([0.0, root - GLUE, 0.0]) - cut)
-    base = base - cut
-    if pins:
-        base = base + pin_base + _mirror(pin_base, plane)
-    base = finish(base)
+    base, plate = _base(cut, pins, pin_base, s, root, plane)
     mirror = _mirror(finger, plane)
     t_channels = time.perf_counter()
     parts = {"finger": finger, "finger_mirror": mirror, "base": base}
@@ -203,6 +142,112 @@ def build_gripper(design: Design, cfg: ExportConfig) -> Assembly:
              "glue_face_mm2": round(_root_area(solid_finger, root), 1)}
     return Assembly(parts, union, tendons, design_volume(design, s, largest=True),
                     body_volume, timings, info, notes, mounting)
+
+
+def _finger(design: Design, s: float, root: float) -> tuple:
+    """The designed finger (mm), kept below the base's lower face ``root`` and reaching it;
+    also the actuator groups' fields, the root pillars, the field's root gap and how far the
+    finger was continued up to the base."""
+    body, regions, gap = design_fields(design, s, extrude_top=3)
+    # the finger stays INSET inside its workspace's sides: a finger face nearly coplanar with
+    # the base's side face leaves edges of 1e-6 mm in the fused assembly (an STL cannot keep them)
+    ws = np.array([[INSET, -1.0, INSET], [FULL[0] * s - INSET, root + 2.0, FULL[2] * s - INSET]])
+    pillars = _root_pillars(design, s, root)
+    finger = body.solid(keep_largest=False, boxes=pillars, clip=ws)
+    finger = finger.trim_by_plane([0.0, -1.0, 0.0], -root)  # keep y <= root
+    finger, short = reach_root(largest_component(finger), root)
+    return finger, regions, pillars, gap, short
+
+
+def _route(finger, regions, cfg: ExportConfig, top: float, root: float, plane: float) -> tuple:
+    """Both fingers' tendons, the alignment pins (x, z) and their solids: the pins on the base
+    and the pockets in the finger's root face."""
+    vox = Voxels.of(finger, cfg.pitch)
+    tendons = route_finger(finger, regions, cfg, "finger", top, root, SIDES, voxels=vox)
+    # alignment pins in the root face, clear of the channels where they run within a pocket's
+    # depth (and a wall) of it; the walls are measured again with the pockets cut
+    avoid = [(x, z, cfg.channel_radius) for t in tendons
+             for x, _, z in _near_root(t, cfg, root, cfg.pin_length + 0.5 + cfg.min_wall
+                                       + cfg.channel_radius + 0.5 * cfg.pin_diameter)]
+    pins = alignment_pins(finger, root, cfg.pin_diameter, cfg.pin_clearance, cfg.min_wall, avoid)
+    pin_base, pockets = pin_solids(pins, root, cfg.pin_diameter, cfg.pin_length,
+                                   cfg.pin_clearance)
+    if pins:
+        check_walls(tendons, finger, cfg, root, pockets)
+    tendons += [mirror_tendon(t, plane, "finger_mirror") for t in tendons]
+    return tendons, pins, pin_base, pockets
+
+
+def _volumes(design: Design, finger, s: float, pillars) -> tuple[float, float, float]:
+    """The finger's volume below the design's top sites (what the volume check compares), the
+    empty cells the root pillars fill and what the finger holds above those sites (mm^3)."""
+    design_top = (design.robot.points[design.robot.active(), 1].max() + SPACING / 2) * s
+    body_volume = finger.trim_by_plane([0.0, -1.0, 0.0], -design_top).volume()
+    fill = _pillar_fill(design, s, pillars, design_top)
+    bridge = finger.volume() - body_volume
+    return body_volume, fill, bridge
+
+
+def _infill(finger, own: list, pins: list, cfg: ExportConfig, root: float) -> tuple[object, dict]:
+    """The finger with its Voronoi infill (``--infill voronoi``), and the infill's numbers."""
+    if cfg.infill != "voronoi":
+        return finger, {}
+    from dbtool.export.geometry.infill import InfillConfig, voronoi_infill
+    from dbtool.export.gripper.channels import _tube, centreline
+
+    foam, info = voronoi_infill(finger, InfillConfig(shell=cfg.shell))
+    # solid sleeves keep each channel and pin pocket a closed hole through the foam
+    sleeves = [_tube(centreline(t, cfg), cfg.channel_radius + cfg.min_wall) for t in own
+               if cfg.channels]
+    if pins:
+        sleeves += [pin_solids(pins, root, cfg.pin_diameter + 2 * cfg.min_wall,
+                               cfg.pin_length, cfg.pin_clearance)[1]]
+    if sleeves:
+        foam = foam + (_union(sleeves) ^ finger)
+    return foam, info
+
+
+def _mounting(solid_finger, tendons: list, pins: list, cfg: ExportConfig, s: float, root: float,
+              plane: float) -> dict:
+    """The mounting holes, where neither finger's shadow nor a tube seat is in the way, and
+    the alignment pins, as the report and the assembly sheet give them."""
+    seats = [(t.exit[0], t.exit[2], cfg.seat_radius) for t in tendons]
+    mirrored = _mirror(solid_finger, plane)
+    mounting = mount_holes([solid_finger, mirrored], (0.0, 0.0, FULL[0] * s, FULL[2] * s),
+                           root, cfg.mount_hole, cfg.screw_head, avoid=seats, mirror_z=plane)
+    mounting["clearance_mm3"] = [round(v, 3) for v in hole_clearance(
+        [solid_finger, mirrored], mounting["holes"], 0.5 * cfg.screw_head, root)]
+    mounting["pins"] = [[round(float(x), 3), round(float(z), 3)] for x, z in pins]
+    mounting["pins_mirror"] = [[x, round(2 * plane - z, 3)] for x, z in mounting["pins"]]
+    mounting["pin_diameter_mm"] = cfg.pin_diameter
+    mounting["pin_length_mm"] = cfg.pin_length
+    return mounting
+
+
+def _hole_cut(holes: list, cfg: ExportConfig, s: float, root: float):
+    """The mounting holes' cylinders, through the base from below."""
+    r = 0.5 * cfg.mount_hole
+    cylinders = []
+    for x, z in holes:
+        hole = m3.Manifold.cylinder(BASE * s + 2.0, r, r, 24)
+        cylinders.append(hole.rotate([-90.0, 0.0, 0.0]).translate([x, root - 1.0, z]))
+    return _union(cylinders)
+
+
+def _base(cut, pins: list, pin_base, s: float, root: float, plane: float) -> tuple:
+    """The base plate with ``cut`` taken out and the pins on, and the plate of the fused
+    assembly."""
+    base = m3.Manifold.cube([FULL[0] * s, BASE * s, FULL[2] * s]).translate([0.0, root, 0.0])
+    # the fingers only touch the plate's lower face; in the fused assembly the plate reaches
+    # GLUE lower so fingers and plate overlap and join into one body (one box, cut once: a
+    # separate glue slab shares the holes' walls with the plate, which leaves slivers)
+    plate = m3.Manifold.cube([FULL[0] * s, BASE * s + GLUE, FULL[2] * s])
+    plate = finish(plate.translate([0.0, root - GLUE, 0.0]) - cut)
+    base = base - cut
+    if pins:
+        base = base + pin_base + _mirror(pin_base, plane)
+    base = finish(base)
+    return base, plate
 
 
 def _root_area(finger, root: float) -> float:

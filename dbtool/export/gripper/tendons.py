@@ -16,7 +16,7 @@ moment arm), within ``BAND`` of it (``"straight"``: ties go to the straightest r
 (``prefer="depth"``); ties go to the voxel nearest the previous point. The later choices are
 the re-routes when the first one leaves a wall too thin or a bend too tight. The tip-most
 point is the anchor. The channel through these points, its bends, its wall and its ends are
-:mod:`dbtool.export.channels`.
+:mod:`dbtool.export.gripper.channels`.
 """
 
 from __future__ import annotations
@@ -25,8 +25,8 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from dbtool.export.mesh import OccupancyField
-from dbtool.export.voxels import Voxels
+from dbtool.export.geometry.mesh import OccupancyField
+from dbtool.export.geometry.voxels import Voxels
 
 ROLES = {0: "extension", 1: "flexion"}  # gripping's group 0 is the outer strip, 1 the inner
 BAND = {"straight": 2.5}  # mm of moment arm given up for a straighter run ("straight" route)

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from dbtool.design import Design
-from dbtool.export.mesh import OccupancyField
+from dbtool.errors import InputError
+from dbtool.export.geometry.mesh import OccupancyField
 from dbtool.sim.tasks.base import SPACING
 
 
@@ -23,7 +24,7 @@ def design_fields(design: Design, scale: float, extrude_top: int = 0
     robot = design.robot
     points, active = robot.points, robot.active()
     if not active.any():
-        raise ValueError("the design has no active particles: nothing to export")
+        raise InputError("the design has no active particles: nothing to export")
     w = robot.actuators
     label = np.where(w.max(1) > 0, w.argmax(1), -1) if w.size else np.full(robot.n, -1)
     gap = 0.0

@@ -2,11 +2,11 @@
 
 A body's lattice sites (2.5 mm apart at the default scale) mark an indicator that is upsampled
 ``UPSAMPLE`` times along each axis and smoothed by a Gaussian of ``SMOOTH`` sites. Its level set
-is meshed on the fine grid by marching tetrahedra (:mod:`dbtool.export.isosurface`), which
+is meshed on the fine grid by marching tetrahedra (:mod:`dbtool.export.geometry.isosurface`), which
 always returns a manifold (watertight, consistently oriented) solid. The level is not 0.5 but
 the one that keeps the volume: as many fine voxels lie above it as the blocky indicator holds,
 so rounding the lattice's steps neither grows nor shrinks the body. The largest connected
-component is kept. :mod:`dbtool.export.voxels` goes the other way (a manifold -> voxels).
+component is kept. :mod:`dbtool.export.geometry.voxels` goes the other way (a manifold -> voxels).
 """
 
 from __future__ import annotations
@@ -17,10 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from dbtool.atomic import atomic_write
+from dbtool.errors import InputError
 from dbtool.export._manifold import to_trimesh
-from dbtool.export.isosurface import marching_tetrahedra
+from dbtool.export.config import MM_PER_UNIT
+from dbtool.export.geometry.isosurface import marching_tetrahedra
 
-MM_PER_UNIT = 1000.0  # a gripper finger (0.06 x 0.0725 x 0.0425) becomes a 60 x 72.5 x 42.5 mm part
 FINISH_MM = 1e-3  # mm: edges shorter than this are collapsed in the finished parts
 UPSAMPLE = 4  # fine voxels per lattice site along each axis: the meshing grid (0.625 mm)
 SMOOTH = 0.7  # Gaussian smoothing of the site indicator, in sites (docs/export.md: staircase)
@@ -100,7 +101,7 @@ class OccupancyField:
             support &= within.grid > 1e-3
         nz = np.argwhere(support)
         if len(nz) == 0:
-            raise ValueError("the body is empty: nothing to export")
+            raise InputError("the body is empty: nothing to export")
         h = self.spacing * self.scale  # the fine grid's pitch in mm: samples are voxel centres
         o = self.origin * self.scale
         a, b = nz.min(0) - 2, nz.max(0) + 3
@@ -130,7 +131,7 @@ class OccupancyField:
             values = np.minimum(values, -out / h)
         solid = marching_tetrahedra(values.reshape(n), start, h)
         if solid.is_empty():
-            raise ValueError("the body is too thin to mesh at this resolution")
+            raise InputError("the body is too thin to mesh at this resolution")
         return largest_component(solid) if keep_largest else solid
 
 

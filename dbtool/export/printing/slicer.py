@@ -22,6 +22,8 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from dbtool.errors import RunError
+
 ENV_VAR = "DBTOOL_SLICER"
 BED_MM = (250.0, 210.0)  # x, y of the build plate
 MAX_HEIGHT_MM = 210.0
@@ -100,8 +102,8 @@ _PROGRESS = re.compile(r"^\s*\d+\s+=>\s")
 _TRACE_INIT = re.compile(r"^\[[^]]*\] \[[^]]*\] \[trace\]\s+Initializing StaticPrintConfigs")
 
 
-class SlicerMissing(RuntimeError):
-    """No PrusaSlicer to run."""
+class SlicerMissing(RunError):
+    """No PrusaSlicer to run (a missing external tool the user can install)."""
 
 
 @dataclass
