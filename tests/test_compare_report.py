@@ -9,6 +9,7 @@ import pytest
 
 from dbtool.compare import report
 from dbtool.design import Design
+from dbtool.errors import MissingFileError
 from dbtool.robotize.actuators import reference_robot
 from dbtool.sim.tasks import get_task
 
@@ -61,7 +62,7 @@ def test_read_results_types(folder):
 
 def test_read_results_errors(tmp_path):
     missing = tmp_path / "nothing.csv"
-    with pytest.raises(ValueError, match="results file not found: .*nothing.csv"):
+    with pytest.raises(MissingFileError, match="results file not found: .*nothing.csv"):
         report.read_results(missing)
     bad = tmp_path / "bad.csv"
     bad.write_text("method,task,seed\nparticle,crawling,0\n")

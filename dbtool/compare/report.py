@@ -58,7 +58,8 @@ def _number(text: str, kind: type, name: str, where: str) -> float | int:
 def read_results(path: str | Path) -> list[dict]:
     """The rows of ``results.csv`` with typed fields: ``seed`` and episode counts int, metric,
     budgets and ``wall_s`` float (nan where empty). A done row must have a finite metric.
-    Raises ``ValueError`` (one line naming the file) for a missing or malformed file."""
+    Raises :class:`~dbtool.errors.MissingFileError` for a missing file and
+    :class:`~dbtool.errors.InputError` for a malformed one (one line naming the file)."""
     path = Path(path)
     if not path.is_file():
         raise MissingFileError(f"results file not found: {path}")
