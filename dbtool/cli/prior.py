@@ -88,7 +88,11 @@ def prior_evaluate(
         res = evaluate(prior, families or None, samples, steps, guidance, log=typer.echo,
                        version=corpus, parts=parts.get)
         if corpus == 2:
-            from dbtool.attributes import attribute_control, attribute_prompts, legs_control
+            from dbtool.robotize.attributes import (
+                attribute_control,
+                attribute_prompts,
+                legs_control,
+            )
 
             res["attributes"] = attribute_control(prior, attribute_prompts(families or None),
                                                   n=attribute_pairs, guidance=guidance,

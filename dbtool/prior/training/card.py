@@ -164,8 +164,8 @@ def _v2_quality(ev: dict) -> list[str]:
         out += ["### Attribute control", "",
                 "For every graded attribute of every family, the prompt with the low word and "
                 "the one with the high word sample from the same noise; a pair is right when a "
-                "measurement that does not use the generator (dbtool/attributes.py: thickness "
-                "2V/A of the reconstructed solid, length and width from the horizontal "
+                "measurement that does not use the generator (dbtool/robotize/attributes.py: "
+                "thickness 2V/A of the reconstructed solid, length and width from the horizontal "
                 "extents, height, roundness, taper, curvature of the centre line) moves the "
                 f"right way. **{right} of {total} pairs right ({right / total:.0%}).**", "",
                 "| attribute | pairs right |", "|---|---:|"]
