@@ -1,5 +1,5 @@
 """Does the method work? The co-design experiments over several seeds (a command line over
-:mod:`dbtool.codesign.experiments`).
+``benchmarks/_codesign_experiments.py``).
 
 * ``embedding``: embedding optimisation (quick preset) on crawling and gripping; mean
   performance of epoch 0's samples against the last epoch's, per seed.
@@ -52,9 +52,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
+import _codesign_experiments as ex  # noqa: E402
 from _results import write_result  # noqa: E402
 
-from dbtool.codesign import experiments as ex  # noqa: E402
 from dbtool.codesign.config import PROMPT_T_MIN, preset  # noqa: E402
 from dbtool.provenance import file_digest  # noqa: E402
 

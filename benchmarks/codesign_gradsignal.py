@@ -33,8 +33,9 @@ RESULTS = Path(__file__).parent / "results"
 def gradient(prior, clouds: np.ndarray, idx: np.ndarray, guidance: float, seed: int,
              draws: int = 64, chunk: int = 16) -> torch.Tensor:
     """d(mean diffusion loss of ``clouds[idx]``)/dc at the null embedding."""
+    from _codesign_experiments import NULL
+
     from dbtool.codesign.embedding import guided_loss
-    from dbtool.codesign.experiments import NULL
     from dbtool.prior.sampling.diffusion import SCALE
 
     gen = torch.Generator().manual_seed(seed)
@@ -51,9 +52,10 @@ def gradient(prior, clouds: np.ndarray, idx: np.ndarray, guidance: float, seed: 
 
 
 def one_seed(prior, task: str, seed: int, version: int) -> dict:
+    from _codesign_experiments import NULL, embedding_config
+
     from dbtool.codesign.config import EmbeddingConfig
     from dbtool.codesign.embedding import score
-    from dbtool.codesign.experiments import NULL, embedding_config
     from dbtool.sim.tasks import get_task
 
     emb = EmbeddingConfig(**embedding_config(task, seed, 4, "free", None, version)["embedding"])

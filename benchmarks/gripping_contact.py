@@ -52,7 +52,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path)
     a = ap.parse_args()
-    from dbtool.codesign.experiments import NULL
+    from _codesign_experiments import NULL
+
     from dbtool.prior.sampling.pipeline import Prior
 
     clouds = Prior.load().sample(embedding=NULL, n=a.samples, seed=a.seed).clouds

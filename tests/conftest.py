@@ -6,10 +6,15 @@ pytest-xdist (``pytest -n 2``, as CI runs) each worker process has its own runti
 """
 
 import os
+import sys
+from pathlib import Path
 
 import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# benchmark support code that tests exercise (``_codesign_experiments``), last on the path so
+# that the benchmarks' scripts never shadow an installed module
+sys.path.append(str(Path(__file__).resolve().parents[1] / "benchmarks"))
 if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1:
     # pytest-xdist workers share the cores: one Taichi and one torch thread each (set before
     # either is imported; subprocesses the tests start inherit it).

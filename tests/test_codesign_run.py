@@ -12,9 +12,10 @@ from cli_inprocess import run_cli
 
 from dbtool.codesign import design_run as run_mod
 from dbtool.codesign.config import CodesignConfig, preset
-from dbtool.codesign.design_run import DesignRun, RunError, Settings
+from dbtool.codesign.design_run import DesignRun, RunDirectoryError, Settings
 from dbtool.codesign.langevin import clip_rms, codesign_sample, rms, stops
 from dbtool.design import Design
+from dbtool.errors import InputError
 from dbtool.prior.sampling.pipeline import Prior
 from dbtool.provenance import config_hash, git_commit
 from dbtool.sim.tasks import get_task
@@ -189,7 +190,7 @@ def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp
     assert rows_b == rows
 
     # a finished run refuses to be overwritten
-    with pytest.raises(RunError, match="already holds a run"):
+    with pytest.raises(RunDirectoryError, match="already holds a run"):
         DesignRun(tmp_path / "a", _settings(), prior).start("cpu")
     # and resuming it under another task is refused
     before = (tmp_path / "a" / "checkpoint.pt").read_bytes()
@@ -199,15 +200,15 @@ def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp
 
 
 def test_resume_rejects_a_non_run_and_a_corrupt_checkpoint(prior, tmp_path):
-    with pytest.raises(RunError, match="not a dbtool run"):
+    with pytest.raises(RunDirectoryError, match="not a dbtool run"):
         DesignRun.resume(tmp_path, prior)
     (tmp_path / "config.json").write_text("{}")
-    with pytest.raises(RunError, match="no checkpoint"):
+    with pytest.raises(RunDirectoryError, match="no checkpoint"):
         DesignRun.resume(tmp_path, prior)
     (tmp_path / "checkpoint.pt").write_bytes(b"garbage" * 10)
-    with pytest.raises(RunError, match="corrupt checkpoint"):
+    with pytest.raises(RunDirectoryError, match="corrupt checkpoint"):
         DesignRun.resume(tmp_path, prior)
-    with pytest.raises(RunError, match="unknown preset"):
+    with pytest.raises(InputError, match="unknown preset"):
         _settings(preset="fast").configs()
 
 
@@ -282,9 +283,10 @@ def test_settings_resize_the_embedding_epochs():
 def test_bandit_model_moves_the_mixture_onto_the_condition_that_performs():
     """The bandit replays measured metrics through the real Embedding, Buffer and
     mixture_step: with one condition far better than the rest, the epoch means rise."""
+    from _codesign_experiments import bandit
+
     from dbtool.codesign.config import preset
     from dbtool.codesign.embedding import caption_atoms
-    from dbtool.codesign.experiments import bandit
 
     n = 1 + len(caption_atoms()[0])
     metrics = [np.array([0.0, 1e-4, np.nan])] * n

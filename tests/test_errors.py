@@ -45,3 +45,16 @@ def test_a_missing_named_file_is_a_user_error(tmp_path, capsys):
                                  DetachedError])
 def test_every_domain_error_is_a_dbtool_error(cls):
     assert issubclass(cls, errors.DbtoolError)
+
+
+def test_the_string_settings_of_the_method_are_checked():
+    """A typo in a mode is an error naming the choices, not a silent fall into one branch."""
+    from dbtool.codesign.config import CodesignConfig, EmbeddingConfig, preset
+
+    for field, bad in (("target", "x_0"), ("gradient", "scored "), ("handover", "last")):
+        with pytest.raises(errors.InputError, match=f"{field} must be one of"):
+            CodesignConfig(**{field: bad})
+    with pytest.raises(errors.InputError, match="space must be one of mixture, captions, free"):
+        EmbeddingConfig(buffer_size=60, space="mix")
+    emb, cod = preset("quick", "gripping")  # every preset is valid
+    assert emb.space == "mixture" and cod.target == "x0"

@@ -7,9 +7,9 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+from _codesign_experiments import Cache
 
 from dbtool.codesign.config import preset
-from dbtool.codesign.experiments import Cache
 from dbtool.provenance import commit_tag, config_hash, git_commit, provenance
 from dbtool.runs import manifest
 

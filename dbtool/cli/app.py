@@ -174,7 +174,7 @@ def generate(
 
     settings = GenerateSettings(n, guidance, steps, seed, upsample, eta)
     out = out or default_run_dir("generate")
-    with guarded(RuntimeError):
+    with guarded():
         check_prompts(prompts)
         prior = Prior.load(base, upsampler if upsample else None, with_upsampler=upsample,
                            version=version)

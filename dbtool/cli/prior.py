@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from dbtool.cli.common import guarded
+from dbtool.errors import InputError
 
 prior_app = typer.Typer(no_args_is_help=True, help="Train, export and evaluate the prior.")
 
@@ -78,7 +79,7 @@ def prior_evaluate(
     with guarded():
         prior = Prior.load(base, with_upsampler=False)
         if corpus not in (1, 2):
-            raise ValueError(f"unknown corpus version {corpus}: 1 or 2")
+            raise InputError(f"unknown corpus version {corpus}: 1 or 2")
         parts = Parts(out.with_name(out.stem + ".parts.json"), {
             "weights": weights_digest(prior.base), "samples": samples, "steps": steps,
             "guidance": guidance, "families": families or None, "corpus": corpus,

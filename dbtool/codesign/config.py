@@ -10,7 +10,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-TASKS = ("balancing", "landing", "crawling", "hurdling", "gripping", "box")
+from dbtool.errors import InputError
+from dbtool.sim.task_names import NAMES as TASKS
+
+# the string settings and the values each takes (a typo is an error, not another branch)
+SPACES = ("mixture", "captions", "free")
+TARGETS = ("x0", "xt")
+GRADIENTS = ("scored", "straight")
+HANDOVERS = ("best", "final")
+
+
+def _choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        raise InputError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
 
 
 # Text feedback (docs/method.md §6) guides the sampler only at t >= PROMPT_T_MIN: the prompt
@@ -37,6 +49,9 @@ class EmbeddingConfig:
     free_lr: float = 2e-3  # Adam on the raw 384-d c (space "free"; unit-norm captions)
     baseline: bool = False  # subtract the loss on the newest unfiltered samples
     elite: bool = False  # train on the top-k of the FIFO and of the best designs ever
+
+    def __post_init__(self) -> None:
+        _choice("space", self.space, SPACES)
 
 
 @dataclass(frozen=True)
@@ -65,6 +80,11 @@ class CodesignConfig:
     gradient: str = "scored"
     search: tuple[float, ...] = (0.02, 0.04, 0.08)
     handover: str = "best"
+
+    def __post_init__(self) -> None:
+        _choice("target", self.target, TARGETS)
+        _choice("gradient", self.gradient, GRADIENTS)
+        _choice("handover", self.handover, HANDOVERS)
 
     @property
     def searching(self) -> bool:
@@ -96,9 +116,9 @@ PRESETS = ("paper", "quick")
 def preset(name: str, task: str) -> tuple[EmbeddingConfig, CodesignConfig]:
     """The two configs of ``task`` under preset ``name``."""
     if task not in TABLE4:
-        raise ValueError(f"unknown task {task!r}; choose one of {', '.join(TASKS)}")
+        raise InputError(f"unknown task {task!r}; choose one of {', '.join(TASKS)}")
     if name not in PRESETS:
-        raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
+        raise InputError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
     emb, cod = TABLE4[task], TABLE5[task]
     if name == "quick":
         ratio = emb.buffer_size // emb.samples_per_epoch  # epochs the buffer remembers

@@ -38,6 +38,7 @@ from dbtool.codesign.config import (
 )
 from dbtool.codesign.embedding import EmbeddingOptimiser, score
 from dbtool.codesign.langevin import codesign_sample
+from dbtool.errors import InputError, RunError
 from dbtool.prior.sampling.text import null
 from dbtool.sim.tasks import N_STEPS, Task, get_task
 
@@ -45,7 +46,7 @@ FORMAT = "dbtool.run/1"
 CHECKPOINT = "checkpoint.pt"
 
 
-class RunError(ValueError):
+class RunDirectoryError(InputError):
     """A run directory or its checkpoint cannot be used."""
 
 
@@ -99,7 +100,7 @@ class Settings:
 
     def configs(self) -> tuple[EmbeddingConfig, CodesignConfig]:
         if self.preset not in PRESETS:
-            raise RunError(f"unknown preset {self.preset!r}; choose one of {', '.join(PRESETS)}")
+            raise InputError(f"unknown preset {self.preset!r}; choose one of {', '.join(PRESETS)}")
         emb, cod = preset(self.preset, self.task)
         if self.epochs is not None:
             emb = replace(emb, epochs=self.epochs)
@@ -162,7 +163,7 @@ class DesignRun:
         from dbtool.runs import manifest, write_json
 
         if (self.path / CHECKPOINT).exists() or (self.path / "design.npz").exists():
-            raise RunError(f"{self.path} already holds a run; use --resume or another "
+            raise RunDirectoryError(f"{self.path} already holds a run; use --resume or another "
                            "--run-dir")
         self.path.mkdir(parents=True, exist_ok=True)
         write_json(self.path / "config.json", self.config())
@@ -204,13 +205,13 @@ class DesignRun:
         path = Path(path)
         ck_path = path / CHECKPOINT
         if not path.is_dir() or not (path / "config.json").is_file():
-            raise RunError(f"{path} is not a dbtool run directory (no config.json)")
+            raise RunDirectoryError(f"{path} is not a dbtool run directory (no config.json)")
         if not ck_path.is_file():
-            raise RunError(f"{path} has no checkpoint to resume from ({CHECKPOINT})")
+            raise RunDirectoryError(f"{path} has no checkpoint to resume from ({CHECKPOINT})")
         try:
             ck = torch.load(ck_path, map_location="cpu", weights_only=True)
             if not isinstance(ck, dict) or ck.get("format") != FORMAT:
-                raise RunError(f"{ck_path} is not a dbtool run checkpoint")
+                raise RunDirectoryError(f"{ck_path} is not a dbtool run checkpoint")
             # runs from before the prompt window had the prompt on every step
             run = cls(path, Settings(**{"prompt_t_min": 0, **ck["settings"]}), prior)
             o = run.opt
@@ -228,10 +229,10 @@ class DesignRun:
                  "stop": None if int(s.get("stop", -1)) < 0 else int(s["stop"]),
                  "controller": None if s["controller"] is None else s["controller"].numpy()}
                 for s in ck["samples"]])
-        except RunError:
+        except RunDirectoryError:
             raise
         except Exception as exc:  # noqa: BLE001 - any damage gets the same one-line error
-            raise RunError(f"corrupt checkpoint {ck_path} ({exc.__class__.__name__}: "
+            raise RunDirectoryError(f"corrupt checkpoint {ck_path} ({exc.__class__.__name__}: "
                            f"{str(exc)[:80]})") from None
         return run
 

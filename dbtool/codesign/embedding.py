@@ -19,14 +19,12 @@ import numpy as np
 import torch
 
 from dbtool.codesign.buffer import Buffer, Entry
-from dbtool.codesign.config import EmbeddingConfig
+from dbtool.codesign.config import SPACES, EmbeddingConfig
 from dbtool.errors import InputError
 from dbtool.prior.sampling.diffusion import SCALE, guided_eps
 from dbtool.robotize import RobotizeError, evaluate
 from dbtool.sim.simulator import SimulationError
 from dbtool.sim.tasks import N_STEPS, Task
-
-SPACES = ("mixture", "captions", "free")
 
 
 def score(clouds: np.ndarray, task: Task, n_steps: int = N_STEPS, progress=None,

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from dbtool.codesign.design_run import DesignRun, RunError, Settings
+from dbtool.codesign.design_run import DesignRun, RunDirectoryError, Settings
 
 
 def open_design_run(settings: Settings, run_dir: str | Path | None = None,
@@ -13,7 +13,8 @@ def open_design_run(settings: Settings, run_dir: str | Path | None = None,
     """A new run of ``settings`` in ``run_dir`` (default ``runs/design-TASK-TIME``), seeded and
     with its directory written; or, with ``resume``, the run in that directory, which must be
     one for ``settings.task`` (its own settings then apply). Bad settings or a run that is not
-    there raise :class:`RunError` (a ``ValueError``) before anything is written."""
+    there raise :class:`RunDirectoryError` (an :class:`~dbtool.errors.InputError`) before
+    anything is written."""
     from dbtool.runs import default_run_dir, seed_everything
     from dbtool.sim import runtime
 
@@ -21,7 +22,7 @@ def open_design_run(settings: Settings, run_dir: str | Path | None = None,
         runtime.init(arch=arch)
         run = DesignRun.resume(resume)
         if run.settings.task != settings.task:
-            raise RunError(f"{resume} is a {run.settings.task} run, not {settings.task}")
+            raise RunDirectoryError(f"{resume} is a {run.settings.task} run, not {settings.task}")
         return run
     settings.configs()
     runtime.init(arch=arch)

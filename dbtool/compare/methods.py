@@ -21,6 +21,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from dbtool.compare.budget import GRAD_COST, Budget, gradient_iterations
+from dbtool.errors import InputError, RunError
 from dbtool.prior.sampling.text import null
 from dbtool.sim.robot import Robot
 from dbtool.sim.tasks import Task
@@ -73,7 +74,7 @@ def run_method(method: str, task: Task, budget: Budget, seed: int,
         return _prior_samples(task, budget, seed, log)
     if method == "diffusebot":
         return _diffusebot(task, budget, seed, log)
-    raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
 
 
 def _gradient(method: str, task: Task, budget: Budget, seed: int, log) -> Outcome:
@@ -94,7 +95,7 @@ def _gradient(method: str, task: Task, budget: Budget, seed: int, log) -> Outcom
 def _best_cloud(task: Task, clouds: np.ndarray, metrics: np.ndarray):
     ok = np.flatnonzero(np.isfinite(metrics))
     if not len(ok):
-        raise RuntimeError(f"none of the {len(clouds)} designs could be robotized and "
+        raise RunError(f"none of the {len(clouds)} designs could be robotized and "
                            "simulated")
     return int(ok[np.argmax(metrics[ok])])
 
@@ -150,7 +151,7 @@ def diffusebot_plan(task: str, budget: Budget) -> dict:
     cd = unit * steps + 1
     emb_units = int(free - cd)
     if emb_units < 2:
-        raise ValueError(f"a budget of {budget.units} units is too small for DiffuseBot: it "
+        raise InputError(f"a budget of {budget.units} units is too small for DiffuseBot: it "
                          f"needs {int(cd) + 3} (two embedding epochs, one Langevin step, the "
                          "final evaluation)")
     epochs = int(np.clip(emb_units // 60, 2, 20))
@@ -214,6 +215,6 @@ def _diffusebot(task: Task, budget: Budget, seed: int, log) -> Outcome:
     for e in opt.buffer.elite[:1]:
         cands.append((e.metric, e.cloud, None, f"embedding epoch {e.epoch}"))
     if not cands:
-        raise RuntimeError("no design of the run could be robotized and simulated")
+        raise RunError("no design of the run could be robotized and simulated")
     metric, cloud, ctrl, source = max(cands, key=lambda c: c[0])
     return _to_outcome(task, cloud, ctrl, budget.n_steps, {**plan, "source": source})

@@ -1,4 +1,5 @@
-"""The co-design experiments of ``benchmarks/codesign.py``, one (task, seed) at a time, on the
+"""The co-design experiments of ``benchmarks/codesign.py`` (benchmark code, outside the
+package), one (task, seed) at a time, on the
 library's own parts: :class:`EmbeddingOptimiser` (docs/method.md §4), the mixture's
 :func:`mixture_step` and :class:`Buffer`, and the design run's :func:`guidance_terms` and
 :func:`codesign_design` (§5, §6).
@@ -25,12 +26,13 @@ from dbtool.codesign.buffer import Buffer
 from dbtool.codesign.config import CodesignConfig, EmbeddingConfig, preset
 from dbtool.codesign.design_run import codesign_design, guidance_terms
 from dbtool.codesign.embedding import Embedding, EmbeddingOptimiser, mixture_step, score
+from dbtool.prior.sampling.text import null
 from dbtool.provenance import commit_tag, config_hash, git_commit, provenance
 from dbtool.sim.tasks import get_task
 
 # text feedback experiments: task -> (prompt, corpus family the Chamfer distance is taken to)
 TEXT_PAIRS = {"balancing": ("a ball", "ball"), "crawling": ("a star", "star")}
-NULL = torch.zeros(1, 384)
+NULL = null()  # the unconditional embedding
 
 
 class Cache:
