@@ -206,7 +206,7 @@ def textwindow_run(prior, task: str, c: torch.Tensor | None, seed: int, variant:
     if variant != "none":
         w, t_min = variant.split("@")
         conds.append((prior.embed(prompt), float(w), int(t_min)))
-    *_, last = prior.sampler(conds, n, 32, 100 + seed)
+    *_, last = prior.denoising_loop(conds, n, 32, 100 + seed)
     x = last.x.numpy() / SCALE
     return {"metric": [float(m) for m in score(x, get_task(task))],
             "chamfer": [chamfer_to_family(xi, family) for xi in x]}

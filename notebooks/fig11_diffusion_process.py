@@ -17,10 +17,10 @@
 # # Figure 11 — samples across diffusion time
 #
 # The prior (docs/method.md §1) denoises a Gaussian cloud into a body in 1,024 training steps;
-# dbtool samples it with strided DDIM and classifier-free guidance (scale 3). The sampler is a
-# generator that hands back control at chosen timesteps, so the intermediate clouds x_t at
+# dbtool samples it with strided DDIM and classifier-free guidance (scale 3). The denoising loop
+# is a generator that hands back control at chosen timesteps, so the intermediate clouds x_t at
 # t = 600, 400, 200 and the final x_0 come out of one run. These intermediate x_t are what the
-# co-design sampler robotizes and simulates at t = 400, 350, ... (docs/method.md §5); the last
+# co-design chain robotizes and simulates at t = 400, 350, ... (docs/method.md §5); the last
 # cell shows their robotized views.
 #
 # Quick mode (`DBTOOL_QUICK=1`, used in CI) draws one sample per prompt with 32 steps instead of
@@ -95,7 +95,7 @@ Image("fig11_interpolation.png")
 # %% [markdown]
 # ## What the robotizer makes of x_t
 #
-# The co-design sampler robotizes x_t, not x_0. Psi (`dbtool.robotize`, Figure 8) is told the
+# The co-design chain robotizes x_t, not x_0. Psi (`dbtool.robotize`, Figure 8) is told the
 # noise level of each x_t (its std in the cloud's frame, from the cosine schedule) and turns the
 # samples of the first prompt into crawling robots (colours: the four actuator groups).
 

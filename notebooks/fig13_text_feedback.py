@@ -18,7 +18,7 @@
 # %% [markdown]
 # # Figure 13 — human text feedback composed with co-design
 #
-# docs/method.md §6: the co-design sampler sums two classifier-free guidance terms, one from the
+# docs/method.md §6: the co-design chain sums two classifier-free guidance terms, one from the
 # embedding that embedding optimisation produced and one from a text prompt, each with its own
 # weight: `eps = eps(x, null) + s_c (eps(x, c) - eps(x, null)) + s_h (eps(x, c_human) -
 # eps(x, null))`. The paper's pairs are balancing + "a ball", crawling + "a star", hurdling +
@@ -26,12 +26,12 @@
 # seed with and without the prompt and shows both, with their performance and the Chamfer
 # distance to the nearest corpus shape of the prompt's family (where there is one).
 #
-# As in `dbtool design --prompt`, the prompt guides only the sampler steps with
+# As in `dbtool design --prompt`, the prompt guides only the denoising steps with
 # t >= `PROMPT_T_MIN` (350): it shapes the coarse body and leaves the rest to c and the physics
 # term (docs/codesign.md measures why). The condition c here is the null embedding (the start of
 # embedding optimisation), so the comparison isolates the prompt. Quick mode (`DBTOOL_QUICK=1`,
-# used in CI) uses two of the pairs (crawling, box), 10-step episodes, 16 sampler steps and
-# co-design stops at t = 100, 0; unset, all four pairs, 100-step episodes, 32 sampler steps and
+# used in CI) uses two of the pairs (crawling, box), 10-step episodes, 16 denoising steps and
+# co-design stops at t = 100, 0; unset, all four pairs, 100-step episodes, 32 denoising steps and
 # the quick preset's stops (400, 300, 200, 100, 0).
 
 # %%

@@ -2,7 +2,7 @@
 
 ``paper`` holds the published values. ``quick`` runs the same algorithm with fewer samples,
 epochs and co-design stops so a design finishes in minutes on a laptop CPU. Values that the
-paper's tables do not give (epochs, embedding learning rate, sampler steps, guidance) are
+paper's tables do not give (epochs, embedding learning rate, denoising steps, guidance) are
 dbtool's choices and say so.
 """
 
@@ -25,7 +25,7 @@ def _choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
         raise InputError(f"{name} must be one of {', '.join(allowed)}; got {value!r}")
 
 
-# Text feedback (docs/method.md §6) guides the sampler only at t >= PROMPT_T_MIN: the prompt
+# Text feedback (docs/method.md §6) guides the denoising loop only at t >= PROMPT_T_MIN: the prompt
 # shapes the coarse body and the optimised embedding (with the physics term) finishes it, so the
 # feedback adds the trait without overwriting the functional body (measured in docs/codesign.md).
 PROMPT_T_MIN = 350
@@ -43,7 +43,7 @@ class EmbeddingConfig:
     epochs: int = 20  # not in Table 4
     lr: float = 1.0  # Adam on the embedding's parameters (simplex logits); not in Table 4
     guidance: float = 3.0  # classifier-free guidance while sampling designs (Point-E's 3)
-    sample_steps: int = 64  # strided sampler steps per design
+    sample_steps: int = 64  # strided denoising steps per design
     loss_guidance: float = 1.0  # guidance of the predictor trained (1: conditional, as paper)
     space: str = "mixture"  # where c lives: mixture of atoms | captions (convex hull) | free
     free_lr: float = 2e-3  # Adam on the raw 384-d c (space "free"; unit-norm captions)

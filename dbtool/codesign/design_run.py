@@ -53,7 +53,7 @@ class RunDirectoryError(InputError):
 def guidance_terms(prior, c: torch.Tensor, guidance: float, prompt: str | None = None,
                    prompt_guidance: float = 3.0, prompt_t_min: int = PROMPT_T_MIN
                    ) -> list[tuple]:
-    """Guidance terms of the co-design sampler: the embedding ``c`` at ``guidance``, plus the
+    """Guidance terms of the co-design chain: the embedding ``c`` at ``guidance``, plus the
     text-feedback ``prompt`` at its own weight, guiding the steps with ``t >= prompt_t_min``
     only (docs/method.md §6)."""
     conds: list[tuple] = [(c, guidance)]
@@ -96,7 +96,7 @@ class Settings:
     n_steps: int = N_STEPS
     prompt_t_min: int = PROMPT_T_MIN  # the prompt guides the steps with t >= this (0: all)
     samples_per_epoch: int | None = None  # designs per embedding epoch; None: the preset's
-    sample_steps: int | None = None  # sampler steps per design; None: the preset's
+    sample_steps: int | None = None  # denoising steps per design; None: the preset's
 
     def configs(self) -> tuple[EmbeddingConfig, CodesignConfig]:
         if self.preset not in PRESETS:
@@ -238,7 +238,7 @@ class DesignRun:
 
     # ------------------------------------------------------------------ work
     def conds(self) -> list[tuple]:
-        """Guidance terms of the co-design sampler (:func:`guidance_terms`) from the optimised
+        """Guidance terms of the co-design chain (:func:`guidance_terms`) from the optimised
         embedding and the settings' prompt."""
         s = self.settings
         return guidance_terms(self.prior, self.opt.current(), self.emb_cfg.guidance, s.prompt,

@@ -148,7 +148,7 @@ class Embedding(torch.nn.Module):
 
     def condition(self) -> torch.Tensor:
         """The single condition that stands for c, ``(1, D)``: c itself, or for ``mixture``
-        its most probable atom (what the co-design sampler is guided by)."""
+        its most probable atom (what the co-design chain is guided by)."""
         with torch.no_grad():
             if self.space == "mixture":
                 return self.atoms[int(self.w.argmax())][None].clone()

@@ -1,8 +1,8 @@
 """Diffusion as co-design (docs/method.md §5; equations 6-7, appendix eqs. 10-13; Table 5).
 
 Sampling runs with the optimised embedding. At every co-design stop
-``t = t_max, t_max - dt, ..., t_min`` the sampler hands ``x_t`` (model space) to ``K`` steps of
-unadjusted Langevin dynamics (eq. 12) on ``log p(x_t | c) + kappa R(Psi(x_t), phi)``::
+``t = t_max, t_max - dt, ..., t_min`` the denoising loop hands ``x_t`` (model space) to ``K``
+steps of unadjusted Langevin dynamics (eq. 12) on ``log p(x_t | c) + kappa R(Psi(x_t), phi)``::
 
     eps    = eps_guided(x_t, t, c)
     s      = -eps / sqrt(1 - abar_t)                              # eq. 13, the model's score
@@ -25,7 +25,7 @@ the cloud by ``min_move`` (RMS, model space) along the clipped gradient of its o
 per-point vectors and ``rho`` is Table 5's renorm scale. Performance R is ascended (``+p``)
 and ``-log p`` descended (``+s``). The controller phi is the per-step actuation sequence,
 initialised from the task's prescribed controller. ``abar_t``, ``beta_t``, the score's
-``sqrt(1 - abar_t)`` and the x0-estimate come from the prior's sampler
+``sqrt(1 - abar_t)`` and the x0-estimate come from the prior's scheduler
 (:class:`~dbtool.prior.sampling.schedulers.Scheduler`), which also takes the ordinary steps
 between stops.
 
@@ -154,6 +154,57 @@ def line_search(x0: torch.Tensor, g: torch.Tensor, m0: float, task: Task,
     return best_a, d, tried
 
 
+@dataclass
+class _Chain:
+    """What the Langevin steps of one sample carry from step to step."""
+
+    phi: np.ndarray | None  # the controller
+    best: Candidate | None = None  # the best design simulated so far
+
+
+def _physics_drift(chain: _Chain, x: torch.Tensor, t: int, eps: torch.Tensor,
+                   model_score: torch.Tensor, task: Task, cfg: CodesignConfig, sched,
+                   n_steps: int, row: dict) -> tuple[torch.Tensor, torch.Tensor | float]:
+    """The physics term of one Langevin step (module docstring): ``(drift, move)``, the
+    score plus the renormalised physics drift, or the score and the line search's move;
+    updates the chain's controller and best design and records the step in ``row``. A
+    failure of the robotizer or the simulator leaves the score alone (recorded)."""
+    beta, ab = sched.beta(t), sched.alpha_bar(t)
+    eta = min(cfg.step_scale * beta, 1.0 - ab)
+    eta_r = max(eta, cfg.min_move / (cfg.K * cfg.renorm))
+    band = cfg.gradient == "straight"
+    x0 = sched.predict_x0(x, t, eps) if cfg.target == "x0" else x
+    try:
+        if cfg.target == "x0":
+            ph = physics(x0, t, task, chain.phi, n_steps, noisy=False, smooth=cfg.smooth,
+                         band=band)
+            ph.grad_x = ph.grad_x / ab ** 0.5
+        else:
+            ph = physics(x, t, task, chain.phi, n_steps, smooth=cfg.smooth, schedule=sched,
+                         band=band)
+    except (RobotizeError, SimulationError, FloatingPointError) as exc:
+        row["error"] = str(exc)
+        return model_score, 0.0
+    drift, move = model_score, 0.0
+    raw = cfg.kappa * ph.grad_x.reshape(x.shape)
+    row.update(metric=ph.metric, physics_rms=rms(raw))
+    if cfg.searching:  # the simulator picks the step (module docstring)
+        chain.best = _keep(chain.best, x0, ph.metric, chain.phi, t)
+        a, d, tried = line_search(x0, raw, ph.metric, task, chain.phi, cfg.search, n_steps)
+        for _, xa, m in tried:
+            chain.best = _keep(chain.best, xa, m, chain.phi, t)
+        move = ab ** 0.5 * a * d
+        row.update(search=[m for *_, m in tried], step=a, physics_move=a * SCALE * ab ** 0.5)
+    else:
+        p = clip_rms(raw, cfg.renorm)
+        drift = model_score + (eta_r / eta) * p  # eta_r / eta is 1 above the floor
+        row.update(applied_rms=rms(p), physics_move=eta_r * rms(p))
+    if task.n_groups > 0 and cfg.gamma > 0 and ph.grad_phi is not None:
+        chain.phi = np.clip(chain.phi + cfg.gamma * ph.grad_phi, -1.0, 1.0)
+        row["phi_grad"] = float(np.abs(ph.grad_phi).max())
+    return drift, move
+
+
 def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float]],
                     cfg: CodesignConfig, seed: int = 0, steps: int = 64,
                     n_steps: int = N_STEPS, controller: np.ndarray | None = None,
@@ -161,70 +212,38 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
     """One design sampled with the co-design Langevin steps (module docstring).
 
     ``conds`` are the guidance terms (the optimised embedding and, for text feedback, the
-    prompt); ``kappa = 0`` gives the plain sampler plus score-only Langevin steps (the
+    prompt); ``kappa = 0`` gives the plain denoising loop plus score-only Langevin steps (the
     ablation). Failures of the robotizer or the simulator at a noisy x_t skip the physics
     term of that step (recorded in the history)."""
     sched = prior.scheduler
-    active = task.n_groups > 0 and cfg.gamma > 0
-    phi = None
+    chain = _Chain(None)
     if task.n_groups > 0:
-        phi = np.array(task.controller(n_steps) if controller is None else controller, float)
+        chain.phi = np.array(task.controller(n_steps) if controller is None else controller,
+                             float)
     gen = torch.Generator().manual_seed(seed + 7_919)
     at = stops(cfg)
     history: list[dict] = []
     last = None
-    best: Candidate | None = None
-    for step in prior.sampler(conds, 1, steps, seed, include=at):
+    for step in prior.denoising_loop(conds, 1, steps, seed, include=at):
         last = step
         if step.t not in at or cfg.K < 1:
             continue
-        t = step.t
-        x = step.x
+        t, x = step.t, step.x
         beta, ab = sched.beta(t), sched.alpha_bar(t)
         eta = min(cfg.step_scale * beta, 1.0 - ab)
         sigma = cfg.sigma_beta * beta
-        eta_r = max(eta, cfg.min_move / (cfg.K * cfg.renorm))
         for k in range(cfg.K):
             eps = guided_eps(prior.eps, x, t, conds)
-            score = -eps / sched.sigma(t)
-            row = {"t": t, "k": k, "score_rms": rms(score)}
-            drift, move = score, 0.0
+            model_score = -eps / sched.sigma(t)
+            row = {"t": t, "k": k, "score_rms": rms(model_score)}
+            drift, move = model_score, 0.0
             if cfg.kappa > 0:
-                band = cfg.gradient == "straight"
-                x0 = sched.predict_x0(x, t, eps) if cfg.target == "x0" else x
-                try:
-                    if cfg.target == "x0":
-                        ph = physics(x0, t, task, phi, n_steps, noisy=False,
-                                     smooth=cfg.smooth, band=band)
-                        ph.grad_x = ph.grad_x / ab ** 0.5
-                    else:
-                        ph = physics(x, t, task, phi, n_steps, smooth=cfg.smooth,
-                                     schedule=sched, band=band)
-                except (RobotizeError, SimulationError, FloatingPointError) as exc:
-                    row["error"] = str(exc)
-                else:
-                    raw = cfg.kappa * ph.grad_x.reshape(x.shape)
-                    row.update(metric=ph.metric, physics_rms=rms(raw))
-                    if cfg.searching:  # the simulator picks the step (module docstring)
-                        best = _keep(best, x0, ph.metric, phi, t)
-                        a, d, tried = line_search(x0, raw, ph.metric, task, phi, cfg.search,
-                                                  n_steps)
-                        for _, xa, m in tried:
-                            best = _keep(best, xa, m, phi, t)
-                        move = ab ** 0.5 * a * d
-                        row.update(search=[m for *_, m in tried], step=a,
-                                   physics_move=a * SCALE * ab ** 0.5)
-                    else:
-                        p = clip_rms(raw, cfg.renorm)
-                        drift = score + (eta_r / eta) * p  # eta_r / eta is 1 above the floor
-                        row.update(applied_rms=rms(p), physics_move=eta_r * rms(p))
-                    if active and ph.grad_phi is not None:
-                        phi = np.clip(phi + cfg.gamma * ph.grad_phi, -1.0, 1.0)
-                        row["phi_grad"] = float(np.abs(ph.grad_phi).max())
+                drift, move = _physics_drift(chain, x, t, eps, model_score, task, cfg, sched,
+                                             n_steps, row)
             x = x + eta * drift + move + sigma * torch.randn(x.shape, generator=gen)
             history.append(row)
             if on_step is not None:
                 on_step(row)
         step.x = x
     cloud = last.x[0].numpy() / SCALE
-    return CodesignResult(cloud, phi, history, best)
+    return CodesignResult(cloud, chain.phi, history, chain.best)

@@ -22,7 +22,7 @@ GRAD_COST = 4.0
 
 @dataclass(frozen=True)
 class Budget:
-    """Simulator units per cell, the episode length and the prior's sampler steps."""
+    """Simulator units per cell, the episode length and the prior's denoising steps."""
 
     name: str
     units: int

@@ -86,7 +86,7 @@ def backward(sp: Stepper, checkpoints: State, adj: Adjoint, regions: Sequence[Re
         # d loss / d u_t = sum_p w_p a_p-adjoint, summed here in a fixed order (before
         # the autodiff kernel, which clears the adjoint of the overwritten a_p): its atomic
         # adds from all particles into one number per group differ in the last bits from
-        # run to run (rel. 1e-5 on gripping), and the co-design sampler amplifies that.
+        # run to run (rel. 1e-5 on gripping), and the co-design chain amplifies that.
         # Its per-particle actuators.grad has no such race.
         g_act[t] = (actuators * adj.actp.to_numpy().astype(np.float64)[:, None]).sum(0)
         K.actuation.grad(body.actuators, body.act, body.actp, t, n)

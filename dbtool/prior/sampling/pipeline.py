@@ -185,7 +185,7 @@ class Prior:
             return self.base(x, t, cond).float()
 
     # ------------------------------------------------------------------ sampling
-    def sampler(self, conds: Sequence[tuple[torch.Tensor, float]], n: int, steps: int = 64,
+    def denoising_loop(self, conds: Sequence[tuple[torch.Tensor, float]], n: int, steps: int = 64,
                 seed: int = 0, points: int = COARSE_POINTS, include: Sequence[int] = (),
                 t_start: int | None = None, x_T: torch.Tensor | None = None,
                 scheduler: Scheduler | None = None) -> Iterator[Step]:
@@ -238,7 +238,7 @@ class Prior:
         inter: dict[int, np.ndarray] = {}
         wanted = {int(t) for t in return_at}
         last = None
-        for step in self.sampler(conds, n, steps, seed, points, include=sorted(wanted),
+        for step in self.denoising_loop(conds, n, steps, seed, points, include=sorted(wanted),
                                  scheduler=scheduler):
             if step.t in wanted:
                 inter[step.t] = step.x.numpy() / SCALE
