@@ -14,6 +14,7 @@ from dbtool.codesign.embedding import (
     train_step,
 )
 from dbtool.prior.corpora.shapes import make_shape
+from dbtool.prior.sampling import text
 from dbtool.prior.sampling.diffusion import diffusion_loss
 from dbtool.prior.sampling.pipeline import Prior
 from dbtool.sim.tasks import get_task
@@ -139,7 +140,7 @@ def test_embedding_starts_at_its_condition_and_stays_in_the_captions_hull():
     w = emb.weights()
     assert float(w[0]) == pytest.approx(0.9) and float(w.sum()) == pytest.approx(1.0)
     # from the null embedding: 0.9 on the zero vector, so c is a tenth of the caption mean
-    null = Embedding(torch.zeros(1, 384), "captions")
+    null = Embedding(text.null(), "captions")
     assert torch.allclose(null(), 0.1 * atoms.mean(0, keepdim=True), atol=1e-6)
     stars = np.stack([make_shape("star", i, "train", 0, 1024).points for i in range(4)])
     buf = Buffer(4)
@@ -163,7 +164,7 @@ def test_mixture_draws_designs_from_atoms_and_trains_toward_the_elite_atoms():
     from dbtool.codesign.embedding import mixture_step
 
     names, atoms = caption_atoms()
-    null = Embedding(torch.zeros(1, 384))  # the default space: a mixture over the atoms
+    null = Embedding(text.null())  # the default space: a mixture over the atoms
     assert null.space == "mixture" and len(null.atoms) == 29
     w = null.weights()
     assert torch.allclose(w, torch.full((29,), 1 / 29))  # the null start is uniform

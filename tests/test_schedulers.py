@@ -16,6 +16,7 @@ from dbtool.prior.sampling.schedulers import (
     schedule_for,
     scheduler_for,
 )
+from dbtool.prior.sampling.text import null
 
 TINY = dict(width=32, heads=2, latents=8, depth=1, decoder_layers=1)
 
@@ -166,7 +167,7 @@ def test_denoise_hands_back_control_at_requested_t():
     assert {400, 350, 300} <= set(ts) and len(ts) == len(set(ts))
     seen = []
     for step in denoise(sched, tiny_model(), torch.randn(2, 16, 3),
-                        [(torch.zeros(1, 384), 1.0)], 16, include=[400, 350]):
+                        [(null(), 1.0)], 16, include=[400, 350]):
         seen.append(step.t)
         if step.t == 400:
             step.x = torch.zeros_like(step.x)  # the caller may replace x_t
