@@ -75,6 +75,8 @@ def test_design_then_export(tmp_path):
     assert len(found) == 1
     d = Design.load(found[0])
     assert d.task == "gripping" and d.controller.shape == (4, 2)
+    assert (found[0].parent / "report.html").stat().st_size > 1_000_000  # by default
+    assert "report:" in out.stdout
     out = _run("export", "--stl", "--no-slice", cwd=tmp_path)  # tests/test_slicer.py slices
     assert out.returncode == 0, out.stderr
     exp = tmp_path / "exports" / found[0].parent.name

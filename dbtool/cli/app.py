@@ -88,6 +88,8 @@ def design(
     method: str = typer.Option("diffusebot", help="diffusebot | particle (the baseline)"),
     iterations: int = typer.Option(4, min=0, help="particle baseline: gradient steps"),
     arch: str = typer.Option("cpu", help="cpu | cuda | auto"),
+    report: bool = typer.Option(True, "--report/--no-report",
+                                help="write report.html (docs/viewing.md)"),
 ) -> None:
     """Breed a robot for TASK (DiffuseBot: embedding optimisation, then diffusion as
     co-design) and save design.npz, metrics and figures in a resumable run directory."""
@@ -104,6 +106,10 @@ def design(
                     bar.set_postfix(metric=f"{m:.5f}"), bar.update(1)))
             typer.echo(f"{res.task}: final metric = {res.metric:.6f}")
             typer.echo(f"design:  {res.design}")
+            if report:
+                from dbtool.report_run import report_run
+
+                typer.echo(f"report:  {report_run(res.design)}")
             return
         run = open_design_run(Settings(get_task(task).name, preset, seed, epochs, start, prompt,
                                        prompt_guidance, samples, kappa, None, steps,
@@ -113,7 +119,7 @@ def design(
                        f"{len(run.state.samples)} co-designed samples done")
         typer.echo(f"run directory: {run.path}")
         try:
-            result = run.run(show_progress=True)
+            result = run.run(show_progress=True, report=report)
         except KeyboardInterrupt:
             typer.echo(f"interrupted; continue with: dbtool design {run.settings.task} "
                        f"--resume {run.path}", err=True)
@@ -122,6 +128,21 @@ def design(
     typer.echo(f"{run.task.name}: final metric = {metric:.6f} "
                f"(from {result.meta.get('source', 'co-design')})")
     typer.echo(f"design:  {run.path / 'design.npz'}")
+    if report:
+        typer.echo(f"report:  {run.path / 'report.html'}")
+
+
+@app.command("report")
+def report_command(
+    path: Path = typer.Argument(..., help="a design run directory or a design file (.npz)"),
+) -> None:
+    """Write one self-contained report.html (no network needed): performance curves, the
+    design in rotatable 3D, its rollout as an animation, the run's config and manifest."""
+    from dbtool.report_run import report_run
+
+    with guarded():
+        out = report_run(path)
+    typer.echo(f"report: {out}")
 
 
 @app.command()

@@ -244,8 +244,9 @@ class DesignRun:
         return guidance_terms(self.prior, self.opt.current(), self.emb_cfg.guidance, s.prompt,
                               s.prompt_guidance, s.prompt_t_min)
 
-    def run(self, show_progress: bool = True):
-        """Finish the run from wherever it stands; returns the final :class:`Design`."""
+    def run(self, show_progress: bool = True, report: bool = True):
+        """Finish the run from wherever it stands; returns the final :class:`Design`
+        (``report``: also write ``report.html``, :func:`write_run_report`)."""
         from tqdm import tqdm
 
         emb, cod = self.emb_cfg, self.cod_cfg
@@ -278,7 +279,7 @@ class DesignRun:
                          stop=sample["stop"])
                 self.checkpoint()
                 bar.update(1)
-        return self.finish()
+        return self.finish(report)
 
     def _save_best(self, n: int = 8) -> None:
         best = self.opt.buffer.elite[:n]
@@ -287,9 +288,10 @@ class DesignRun:
                    metrics=np.array([e.metric for e in best]),
                    epochs=np.array([e.epoch for e in best]))
 
-    def finish(self):
-        """The run's :class:`Design`, plus the figures: the best co-designed sample, unless a
-        design of the embedding epochs scored higher (``meta["source"]`` says which)."""
+    def finish(self, report: bool = True):
+        """The run's :class:`Design`, plus the figures (and ``report.html``): the best
+        co-designed sample, unless a design of the embedding epochs scored higher
+        (``meta["source"]`` says which)."""
         from dbtool.design import Design
         from dbtool.robotize import robotize
         from dbtool.sim.rollout import simulate
@@ -321,6 +323,8 @@ class DesignRun:
         performance_figure(self.state.rows, self.path / "performance.png", self.task.title)
         montage(ro.episode, ro.positions, self.path / "montage.png",
                 title=f"{self.task.title}: metric {ro.metric:.4f}")
+        if report:
+            write_run_report(self.path, design, ro, self.state.rows)
         return design
 
 
@@ -330,6 +334,44 @@ def source(sample: dict) -> str:
     return "co-design (final sample)" if stop is None else f"co-design (stop t = {stop})"
 
 
+def write_run_report(folder: Path, design, ro, rows: list[dict]) -> Path:
+    """``folder/report.html`` (:mod:`dbtool.viz.report`): the run's performance curves, the
+    design and its rollout ``ro``, the folder's config and manifest."""
+    from dbtool.sim.tasks import get_task
+    from dbtool.viz.report import write_report
+
+    def read(name: str) -> dict | None:
+        f = folder / name
+        return json.loads(f.read_text()) if f.is_file() else None
+
+    task = get_task(design.task)
+    summary = {"task": task.title, **{k: design.meta[k] for k in ("method", "preset", "seed",
+                                                                   "source", "prompt")
+                                      if design.meta.get(k) is not None}}
+    return write_report(folder / "report.html", f"dbtool: {task.title}, {folder.name}",
+                        ro.episode, ro.positions, ro.metric, performance_panels(rows),
+                        summary, read("config.json"), read("manifest.json"))
+
+
+def performance_panels(rows: list[dict]) -> list:
+    """The run's two performance plots from its logged rows: mean and max per embedding
+    epoch, and the metric of x_t along each co-designed sample's chain."""
+    from dbtool.viz.report import Curve, Panel
+
+    ep = [r for r in rows if r.get("phase") == "embedding"]
+    epochs = [r["epoch"] for r in ep]
+    emb = Panel("embedding optimisation", "epoch", "performance",
+                [Curve("mean", epochs, [r["mean"] for r in ep]),
+                 Curve("max", epochs, [r["max"] for r in ep])] if ep else [])
+    cd = [r for r in rows if r.get("phase") == "codesign" and "metric" in r
+          and not r.get("final")]
+    chain = Panel("diffusion as co-design", "Langevin step", "performance of x_t")
+    for s in sorted({r["sample"] for r in cd}):
+        pts = [r["metric"] for r in cd if r["sample"] == s]
+        chain.curves.append(Curve(f"sample {s}", list(range(len(pts))), pts))
+    return [emb, chain]
+
+
 def performance_figure(rows: list[dict], path: Path, title: str) -> Path:
     """Mean and max performance per epoch, and the metric of x_t along co-design."""
     import matplotlib
@@ -337,21 +379,14 @@ def performance_figure(rows: list[dict], path: Path, title: str) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.2))
-    ep = [r for r in rows if r.get("phase") == "embedding"]
-    if ep:
-        a.plot([r["epoch"] for r in ep], [r["mean"] for r in ep], "o-", label="mean")
-        a.plot([r["epoch"] for r in ep], [r["max"] for r in ep], "s--", label="max")
-        a.legend()
-    a.set(xlabel="epoch", ylabel="performance", title="embedding optimisation")
-    cd = [r for r in rows if r.get("phase") == "codesign" and "metric" in r
-          and not r.get("final")]
-    for s in sorted({r["sample"] for r in cd}):
-        pts = [r for r in cd if r["sample"] == s]
-        b.plot(range(len(pts)), [r["metric"] for r in pts], "o-", label=f"sample {s}")
-    if cd:
-        b.legend(fontsize=7)
-    b.set(xlabel="Langevin step", ylabel="performance of x_t", title="diffusion as co-design")
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.2))
+    for ax, panel, style in zip(axes, performance_panels(rows), (("o-", "s--"), ("o-",)),
+                                strict=True):
+        for i, c in enumerate(panel.curves):
+            ax.plot(c.x, c.y, style[min(i, len(style) - 1)], label=c.label)
+        if panel.curves:
+            ax.legend(fontsize=7 if panel.title.startswith("diffusion") else None)
+        ax.set(xlabel=panel.xlabel, ylabel=panel.ylabel, title=panel.title)
     fig.suptitle(title)
     fig.tight_layout()
     out = atomic_write(path, lambda p: fig.savefig(p, dpi=110, format="png"))
