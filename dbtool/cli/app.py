@@ -132,6 +132,32 @@ def design(
         typer.echo(f"report:  {run.path / 'report.html'}")
 
 
+@app.command("view")
+def view_command(
+    path: Path = typer.Argument(..., help="a design run directory or a design file (.npz)"),
+    host: str = typer.Option("127.0.0.1", help="address to bind (another exposes the viewer "
+                                               "to the network)"),
+    port: int = typer.Option(8080, min=1, max=65535, help="port of the viewer"),
+) -> None:
+    """Start a local web viewer of a design and its rollout (docs/viewing.md); Ctrl-C stops
+    it. Needs the optional extra: pip install 'dbtool[viewer]'."""
+    import time
+
+    from dbtool.view_run import LOOPBACK, view_run
+
+    if host not in LOOPBACK:
+        typer.secho(f"warning: binding {host}: anyone who can reach this machine can open the "
+                    "viewer", err=True, fg=typer.colors.YELLOW)
+    with guarded():
+        view = view_run(path, host, port)
+    typer.echo(f"viewer: {view.url}  (Ctrl-C stops it)")
+    try:
+        while True:
+            time.sleep(1)
+    except KeyboardInterrupt:
+        view.stop()
+
+
 @app.command("report")
 def report_command(
     path: Path = typer.Argument(..., help="a design run directory or a design file (.npz)"),

@@ -161,7 +161,7 @@ def panel_figure(panel: Panel):
 # Links into the page: ``report.html#step=40`` shows control step 40 of the rollout and
 # ``#eye=1.2,-1.5,0.9`` puts every 3D camera there (plotly's eye coordinates).
 _LINKS = """<script>
-window.addEventListener("load", function () {
+function dbtoolFollowLink() {
   var q = new URLSearchParams(location.hash.slice(1));
   var roll = document.getElementById("rollout");
   if (q.has("step") && roll) {
@@ -176,7 +176,9 @@ window.addEventListener("load", function () {
       }
     });
   }
-});
+}
+window.addEventListener("load", dbtoolFollowLink);
+window.addEventListener("hashchange", dbtoolFollowLink);
 </script>"""
 
 

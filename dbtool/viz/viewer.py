@@ -1,0 +1,145 @@
+"""``dbtool view``: a local web viewer of a design and its rollout, on viser.
+
+viser (the robotics field's web viewer, used by nerfstudio) serves a three.js client from the
+Python process; the client is bundled in its wheel, so nothing is fetched from the network. It
+is an optional extra, ``pip install 'dbtool[viewer]'``.
+
+The scene is the task's: ground, colliders (platform, obstacle, base plate) and the robot's
+particles, coloured by actuator group, stiffness or presence (a switch). The rollout plays
+and can be scrubbed by control step; the panel shows the metric. The simulator's y is up, and
+so is the viewer's.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from dbtool.errors import InputError, RunError
+from dbtool.viz.render import particle_colours
+
+COLOUR_MODES = ("actuator group", "stiffness", "presence")
+EXTRA = "pip install 'dbtool[viewer]'"
+
+
+def require_viser():
+    """The viser module, or a one-line error naming the extra that provides it."""
+    try:
+        import viser
+    except ImportError:
+        raise RunError(f"the viewer needs viser, an optional extra: {EXTRA}") from None
+    return viser
+
+
+def check_port(host: str, port: int) -> None:
+    """Fail (one line) when ``port`` cannot be bound on ``host``; viser itself would move to
+    the next free port without saying so."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((host, port))
+        except OSError as exc:
+            raise InputError(f"port {port} on {host} is not available ({exc.strerror}); "
+                             "choose another with --port") from None
+
+
+def _rgb(hex_colours) -> np.ndarray:
+    return np.array([[int(h[i:i + 2], 16) for i in (1, 3, 5)] for h in hex_colours],
+                    np.uint8)
+
+
+def _ramp(v: np.ndarray) -> np.ndarray:
+    """Values to colours, low blue to high yellow (matplotlib's viridis)."""
+    from matplotlib import colormaps
+
+    lo, hi = float(v.min()), float(v.max())
+    t = (v - lo) / (hi - lo) if hi > lo else np.zeros_like(v)
+    return (colormaps["viridis"](t)[:, :3] * 255).astype(np.uint8)
+
+
+@dataclass
+class DesignView:
+    """A running viewer: its server, the URL, the GUI handles the tests move, and the index
+    of the shown particles."""
+
+    server: object
+    url: str
+    step: object  # the control-step slider
+    colour: object  # the colour-mode dropdown
+    playing: object  # the play checkbox
+    points: object  # the particle cloud's handle
+    halt: threading.Event  # stops the player
+
+    def stop(self) -> None:
+        self.halt.set()
+        self.server.stop()
+
+
+def colours(ep, mode: str, idx: np.ndarray) -> np.ndarray:
+    """RGB per shown particle for a colour mode of :data:`COLOUR_MODES`."""
+    p = ep.particles
+    if mode == "actuator group":
+        return _rgb(particle_colours(ep)[idx])
+    if mode == "stiffness":
+        return _ramp(np.asarray(p.stiffness, float)[idx])
+    if mode == "presence":
+        return _ramp(np.asarray(p.presence, float)[idx])
+    raise InputError(f"colour mode must be one of {', '.join(COLOUR_MODES)}; got {mode!r}")
+
+
+def serve(ep, positions: np.ndarray, metric: float, title: str, host: str = "127.0.0.1",
+          port: int = 8080, max_points: int = 20_000) -> DesignView:
+    """Start the viewer of one rollout (``positions``: control steps x particles x 3) and
+    return at once; :meth:`DesignView.stop` ends it."""
+    viser = require_viser()
+    check_port(host, port)
+    idx = np.flatnonzero(ep.particles.presence > 0)
+    if len(idx) > max_points:
+        idx = idx[np.linspace(0, len(idx) - 1, max_points).astype(int)]
+    server = viser.ViserServer(host=host, port=port, label=f"dbtool: {title}", verbose=False)
+    server.scene.set_up_direction("+y")
+    size, g = np.asarray(ep.scene.size, float), ep.scene.ground_y
+    centre = positions[0][idx].mean(0)
+    reach = float(np.ptp(positions[0][idx], axis=0).max())
+    server.initial_camera.look_at = tuple(centre)
+    server.initial_camera.position = tuple(centre + reach * np.array([1.1, 0.7, -1.4]))
+    server.initial_camera.up = (0.0, 1.0, 0.0)
+    server.scene.add_box("/scene/ground", color=(200, 200, 200),
+                         dimensions=(size[0], 1e-4, size[2]),
+                         position=(size[0] / 2, g, size[2] / 2))
+    for k, (c, h) in enumerate(ep.scene.boxes):
+        server.scene.add_box(f"/scene/collider{k}", color=(60, 60, 60), opacity=0.35,
+                             dimensions=tuple(2 * np.asarray(h, float)),
+                             position=tuple(np.asarray(c, float)))
+    dx = ep.scene.dx
+    cloud = server.scene.add_point_cloud("/robot", points=positions[0][idx].astype(np.float32),
+                                         colors=colours(ep, COLOUR_MODES[0], idx),
+                                         point_size=0.5 * dx, point_shape="circle")
+    server.gui.add_markdown(f"**{title}**  \nmetric {metric:.6g}")
+    colour = server.gui.add_dropdown("colour by", COLOUR_MODES)
+    step = server.gui.add_slider("control step", min=0, max=len(positions) - 1, step=1,
+                                 initial_value=0)
+    playing = server.gui.add_checkbox("play", initial_value=False)
+
+    @colour.on_update
+    def _(_event) -> None:
+        cloud.colors = colours(ep, colour.value, idx)
+
+    @step.on_update
+    def _(_event) -> None:
+        cloud.points = positions[int(step.value)][idx].astype(np.float32)
+
+    halt = threading.Event()
+
+    def player() -> None:
+        while not halt.wait(0.08):
+            if playing.value:
+                step.value = (int(step.value) + 1) % len(positions)
+
+    threading.Thread(target=player, daemon=True).start()
+    shown = "127.0.0.1" if host in ("0.0.0.0", "") else host
+    return DesignView(server, f"http://{shown}:{server.get_port()}", step, colour, playing,
+                      cloud, halt)
