@@ -117,6 +117,16 @@ class Browser:
         data = base64.b64decode(self.call("Page.captureScreenshot", format="png")["data"])
         return iio.imread(io.BytesIO(data))[..., :3].astype(float).mean(-1)
 
+    def settle(self, ready, timeout: float = 90.0) -> np.ndarray:
+        """Screenshots every second until ``ready(screenshot)`` holds (a loaded machine draws
+        slowly); returns the last one, which the caller asserts on."""
+        end = time.monotonic() + timeout
+        shot = self.screenshot()
+        while not ready(shot) and time.monotonic() < end:
+            self.wait(1.0)
+            shot = self.screenshot()
+        return shot
+
     def drag(self, x0: float, y0: float, x1: float, y1: float, steps: int = 12) -> None:
         """Press the left button at (x0, y0), move to (x1, y1), release (CSS pixels)."""
         mouse = "Input.dispatchMouseEvent"

@@ -38,17 +38,15 @@ def test_the_error_check_sees_script_errors(tmp_path):
 
 def test_the_report_draws_offline_and_follows_the_slider_and_the_camera(page):
     with Browser(*SIZE) as b:
-        b.goto(page.as_uri())
-        assert b.errors() == []
-        start = b.screenshot()
+        b.goto(page.as_uri(), settle=2)
+        start = b.settle(lambda s: min(s[DESIGN_ROWS].std(), s[ROLLOUT_ROWS].std()) > 10)
         for rows in (DESIGN_ROWS, ROLLOUT_ROWS):  # not blank: the particles are drawn
             assert start[rows].std() > 10
-        b.goto(page.as_uri() + "#step=100")
-        end = b.screenshot()
+        b.goto(page.as_uri() + "#step=100", settle=1)
+        end = b.settle(lambda s: np.abs(s[ROLLOUT_ROWS] - start[ROLLOUT_ROWS]).mean() > 0.1)
         assert np.abs(end[ROLLOUT_ROWS] - start[ROLLOUT_ROWS]).mean() > 0.1  # it moved
         assert np.abs(end[DESIGN_ROWS] - start[DESIGN_ROWS]).mean() < 0.05  # design at rest
         b.drag(450, 520, 650, 560)  # turn the design's camera
-        b.wait(2)
-        turned = b.screenshot()
+        turned = b.settle(lambda s: np.abs(s[DESIGN_ROWS] - end[DESIGN_ROWS]).mean() > 1.0)
         assert np.abs(turned[DESIGN_ROWS] - end[DESIGN_ROWS]).mean() > 1.0
         assert b.errors() == []
