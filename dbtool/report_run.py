@@ -1,6 +1,7 @@
-"""``dbtool report PATH``: the self-contained ``report.html`` of a design run or design file.
+"""``dbtool report PATH``: the self-contained ``report.html`` of a design or an export.
 
-PATH is a ``dbtool design`` run directory (its ``design.npz``, ``config.json``,
+PATH is an export folder (``dbtool export``'s: :mod:`dbtool.export.reports.page`), a
+``dbtool design`` run directory (its ``design.npz``, ``config.json``,
 ``manifest.json`` and ``metrics.jsonl`` are read) or a ``design.npz``; the design is simulated
 again with its own controller for the rollout, and the report goes next to the design
 (:func:`dbtool.codesign.design_run.write_run_report`, :mod:`dbtool.viz.report`).
@@ -21,7 +22,8 @@ def design_file(path: str | Path) -> Path:
         raise MissingFileError(f"{path} does not exist")
     if path.is_dir():
         if not (path / "design.npz").is_file():
-            raise InputError(f"{path} is not a design run: it holds no design.npz")
+            raise InputError(f"{path} is neither an export folder nor a design run: it holds no "
+                             "report.json or design.npz")
         return path / "design.npz"
     if path.suffix != ".npz":
         raise InputError(f"{path} is neither a design run directory nor a design file (.npz)")
@@ -29,7 +31,12 @@ def design_file(path: str | Path) -> Path:
 
 
 def report_run(path: str | Path) -> Path:
-    """Write ``report.html`` beside the design of PATH; returns its path."""
+    """Write ``report.html`` for PATH: an export folder's (its parts, tendons and assembly
+    sheet), or beside the design of a run directory or design file; returns its path."""
+    from dbtool.export.reports.page import is_export, write_export_page
+
+    if Path(path).is_dir() and is_export(Path(path)):
+        return write_export_page(path)
     from dbtool.atomic import check_writable
     from dbtool.codesign.design_run import write_run_report
     from dbtool.design import Design

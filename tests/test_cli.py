@@ -83,7 +83,7 @@ def test_design_then_export(tmp_path):
     for name in ("finger", "finger_mirror", "base", "assembly"):
         assert (exp / f"{name}.stl").stat().st_size > 0
     assert not (exp / "assembly.3mf").exists()  # --stl alone
-    assert {"tendons.json", "tendons.png", "report.json", "report.md"} <= {
+    assert {"tendons.json", "tendons.png", "report.json", "report.md", "report.html"} <= {
         p.name for p in exp.iterdir()}
     assert "watertight=True bodies=1" in out.stdout
 

@@ -4,6 +4,7 @@ import re
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 from cli_inprocess import run_cli
 
@@ -42,7 +43,7 @@ def test_the_report_holds_the_design_the_rollout_and_the_metric(report):
 
 @pytest.mark.parametrize("make, message", [
     (lambda tmp: tmp / "absent", "does not exist"),
-    (lambda tmp: tmp, "is not a design run: it holds no design.npz"),
+    (lambda tmp: tmp, "neither an export folder nor a design run"),
     (lambda tmp: (tmp / "notes.txt", (tmp / "notes.txt").write_text("x"))[0],
      "neither a design run directory nor a design file"),
 ])
@@ -53,3 +54,32 @@ def test_bad_paths_are_one_line_errors_and_write_nothing(tmp_path, make, message
     assert out.returncode == 2 and message in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
     assert sorted(tmp_path.rglob("*")) == before
+
+
+def test_an_export_folder_gets_its_own_report(tmp_path):
+    """The assembly and its tendons in 3D (decimated for display), the parts' checks and
+    the assembly sheet with its images embedded."""
+    folder = tmp_path / "gripping-seed0"
+    shutil.copytree(ROOT / "exports" / "gripping-seed0", folder)
+    out = run_cli("report", str(folder))
+    assert out.returncode == 0, out.stderr
+    text = (folder / "report.html").read_text()
+    assert (folder / "report.html").stat().st_size < MAX_BYTES
+    assert "assembly.stl (" in text and "triangles shown" in text
+    assert "finger-flexion" in text and "finger-extension" in text  # the tendon paths
+    assert "watertight True" in text  # the parts' checks
+    assert '# Assembly: gripping-seed0' in text  # the assembly sheet
+    assert text.count("<img style='max-width:100%' alt=") == 2  # exploded view, tendons
+    assert not re.findall(r"<script[^>]+src=", text)
+
+
+def test_decimation_keeps_the_shape_and_respects_the_budget():
+    import trimesh
+
+    from dbtool.export.reports.page import decimate
+
+    mesh = trimesh.load(ROOT / "exports" / "gripping-seed0" / "finger.stl")
+    v, f = decimate(np.asarray(mesh.vertices), np.asarray(mesh.faces), 10_000)
+    assert 5_000 < len(f) <= 10_000
+    assert np.allclose(v[np.unique(f)].min(0), mesh.bounds[0], atol=1.0)  # mm
+    assert np.allclose(v[np.unique(f)].max(0), mesh.bounds[1], atol=1.0)

@@ -50,3 +50,14 @@ def test_the_report_draws_offline_and_follows_the_slider_and_the_camera(page):
         turned = b.settle(lambda s: np.abs(s[DESIGN_ROWS] - end[DESIGN_ROWS]).mean() > 1.0)
         assert np.abs(turned[DESIGN_ROWS] - end[DESIGN_ROWS]).mean() > 1.0
         assert b.errors() == []
+
+
+def test_the_export_report_draws_the_assembly(tmp_path):
+    folder = tmp_path / "gripping-seed0"
+    shutil.copytree(ROOT / "exports" / "gripping-seed0", folder)
+    assert run_cli("report", str(folder)).returncode == 0
+    with Browser(*SIZE) as b:
+        b.goto((folder / "report.html").as_uri(), settle=2)
+        shot = b.settle(lambda s: s[300:900].std() > 10)
+        assert shot[300:900].std() > 10  # the assembly and its tendons are drawn
+        assert b.errors() == []

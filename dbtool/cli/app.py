@@ -160,10 +160,12 @@ def view_command(
 
 @app.command("report")
 def report_command(
-    path: Path = typer.Argument(..., help="a design run directory or a design file (.npz)"),
+    path: Path = typer.Argument(..., help="an export folder, a design run directory or a "
+                                          "design file (.npz)"),
 ) -> None:
-    """Write one self-contained report.html (no network needed): performance curves, the
-    design in rotatable 3D, its rollout as an animation, the run's config and manifest."""
+    """Write one self-contained report.html (no network needed): for a design, performance
+    curves, the design in rotatable 3D, its rollout as an animation, config and manifest; for
+    an export, the assembly with its tendons in 3D, the parts' checks and the assembly sheet."""
     from dbtool.report_run import report_run
 
     with guarded():

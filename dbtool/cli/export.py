@@ -48,6 +48,8 @@ def export_command(
     slice_: bool = typer.Option(DEFAULT["slice"], "--slice/--no-slice",
                                 help="check every part with PrusaSlicer when it is installed"),
     out: Path = typer.Option(Path("exports"), help="parent folder; writes OUT/<design-name>/"),
+    report: bool = typer.Option(True, "--report/--no-report",
+                                help="write report.html (docs/viewing.md)"),
 ) -> None:
     """Export a design for fabrication (docs/export.md): watertight, smooth parts in mm, in
     their print orientation; the mirrored gripper on its base with mounting holes, alignment
@@ -68,8 +70,14 @@ def export_command(
         name = design_name(path)
         d = Design.load(path)
         rep = export_design(d, out / name, cfg)
+        if report:
+            from dbtool.export.reports.page import write_export_page
+
+            write_export_page(out / name)
     extra = ["tendons.json", "tendons.png", "assembly.md", "exploded.png"]
-    for f in rep["files"] + ["report.json", "report.md"] + (extra if "tendons" in rep else []):
+    extra += ["report.html"] if report else []
+    for f in rep["files"] + ["report.json", "report.md"] + (
+            extra if "tendons" in rep else extra[4:]):
         typer.echo(f"wrote {out / name / f}")
     main = rep["parts"]["assembly" if "assembly" in rep["parts"] else "body"]
     typer.echo(f"{d.task}: watertight={main['watertight']} bodies={main['bodies']} "

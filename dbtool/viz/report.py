@@ -182,10 +182,13 @@ window.addEventListener("hashchange", dbtoolFollowLink);
 </script>"""
 
 
-def render_html(title: str, summary: dict, figures: dict, texts: dict[str, str]) -> str:
+def render_html(title: str, summary: dict, figures: dict, texts: dict[str, str],
+                images: dict[str, bytes] | None = None) -> str:
     """The page: a summary table, the ``figures`` (by element id; plotly.js embedded with
-    the first), links to a step and a camera (``#step=N``, ``#eye=x,y,z``) and the ``texts``
-    (config, manifest) as preformatted blocks."""
+    the first), links to a step and a camera (``#step=N``, ``#eye=x,y,z``), the ``texts``
+    (config, manifest) as preformatted blocks and PNG ``images`` embedded as data."""
+    import base64
+
     import plotly.io as pio
 
     parts = []
@@ -196,6 +199,9 @@ def render_html(title: str, summary: dict, figures: dict, texts: dict[str, str])
                    for k, v in summary.items())
     blocks = "".join(f"<h2>{html.escape(k)}</h2><pre>{html.escape(v)}</pre>"
                      for k, v in texts.items())
+    blocks += "".join(f"<h2>{html.escape(k)}</h2><img style='max-width:100%' alt="
+                      f"'{html.escape(k)}' src='data:image/png;base64,"
+                      f"{base64.b64encode(v).decode()}'>" for k, v in (images or {}).items())
     return ("<!DOCTYPE html><html><head><meta charset='utf-8'>"
             f"<title>{html.escape(title)}</title><style>"
             "body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}"
