@@ -30,6 +30,20 @@ def design_file(path: str | Path) -> Path:
     return path
 
 
+def replay(file: Path):
+    """The design saved in ``file`` and its rollout, simulated again with its own
+    controller: ``(design, task, rollout)``."""
+    from dbtool.design import Design
+    from dbtool.sim.rollout import simulate
+    from dbtool.sim.tasks import N_STEPS, get_task
+
+    design = Design.load(file)
+    task = get_task(design.task)
+    ro = simulate(task, design.robot, design.controller,
+                  n_steps=len(design.controller) or N_STEPS)
+    return design, task, ro
+
+
 def report_run(path: str | Path) -> Path:
     """Write ``report.html`` for PATH: an export folder's (its parts, tendons and assembly
     sheet), or beside the design of a run directory or design file; returns its path."""
@@ -39,16 +53,10 @@ def report_run(path: str | Path) -> Path:
         return write_export_page(path)
     from dbtool.atomic import check_writable
     from dbtool.codesign.design_run import write_run_report
-    from dbtool.design import Design
-    from dbtool.sim.rollout import simulate
-    from dbtool.sim.tasks import N_STEPS, get_task
 
     file = design_file(path)
     check_writable(file.parent / "report.html")
-    design = Design.load(file)
-    task = get_task(design.task)
-    n_steps = len(design.controller) or N_STEPS
-    ro = simulate(task, design.robot, design.controller, n_steps=n_steps)
+    design, _task, ro = replay(file)
     rows = []
     log = file.parent / "metrics.jsonl"
     if log.is_file():

@@ -14,18 +14,12 @@ LOOPBACK = ("127.0.0.1", "localhost", "::1")
 def view_run(path: str | Path, host: str = "127.0.0.1", port: int = 8080):
     """Check PATH, the extra and the port, simulate the design, start the viewer; returns the
     :class:`~dbtool.viz.viewer.DesignView` (its ``url``)."""
-    from dbtool.design import Design
-    from dbtool.report_run import design_file
-    from dbtool.sim.rollout import simulate
-    from dbtool.sim.tasks import N_STEPS, get_task
+    from dbtool.report_run import design_file, replay
     from dbtool.viz.viewer import check_port, require_viser, serve
 
     file = design_file(path)
     require_viser()
     check_port(host, port)
-    design = Design.load(file)
-    task = get_task(design.task)
-    ro = simulate(task, design.robot, design.controller,
-                  n_steps=len(design.controller) or N_STEPS)
+    _design, task, ro = replay(file)
     return serve(ro.episode, ro.positions, ro.metric, f"{task.title}: {file.parent.name}",
                  host, port)

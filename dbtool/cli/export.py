@@ -74,10 +74,10 @@ def export_command(
             from dbtool.export.reports.page import write_export_page
 
             write_export_page(out / name)
-    extra = ["tendons.json", "tendons.png", "assembly.md", "exploded.png"]
-    extra += ["report.html"] if report else []
-    for f in rep["files"] + ["report.json", "report.md"] + (
-            extra if "tendons" in rep else extra[4:]):
+    sheet = ["tendons.json", "tendons.png", "assembly.md", "exploded.png"] \
+        if "tendons" in rep else []
+    for f in rep["files"] + ["report.json", "report.md"] + sheet + (
+            ["report.html"] if report else []):
         typer.echo(f"wrote {out / name / f}")
     main = rep["parts"]["assembly" if "assembly" in rep["parts"] else "body"]
     typer.echo(f"{d.task}: watertight={main['watertight']} bodies={main['bodies']} "

@@ -380,12 +380,13 @@ def performance_figure(rows: list[dict], path: Path, title: str) -> Path:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.2))
-    for ax, panel, style in zip(axes, performance_panels(rows), (("o-", "s--"), ("o-",)),
-                                strict=True):
+    styles, fonts = (("o-", "s--"), ("o-",)), (None, 7)  # the epochs' panel, the chains'
+    for ax, panel, style, font in zip(axes, performance_panels(rows), styles, fonts,
+                                      strict=True):
         for i, c in enumerate(panel.curves):
             ax.plot(c.x, c.y, style[min(i, len(style) - 1)], label=c.label)
         if panel.curves:
-            ax.legend(fontsize=7 if panel.title.startswith("diffusion") else None)
+            ax.legend(fontsize=font)
         ax.set(xlabel=panel.xlabel, ylabel=panel.ylabel, title=panel.title)
     fig.suptitle(title)
     fig.tight_layout()

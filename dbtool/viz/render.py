@@ -29,17 +29,32 @@ def particle_colours(ep) -> np.ndarray:
     return cols
 
 
-def draw_frame(ax, ep, x: np.ndarray, cols, max_points: int, title: str | None) -> None:
-    """Draw one frame of a rollout (active particles, colliders, ground) on a 3-D axis."""
-    keep = ep.particles.presence > 0
-    idx = np.flatnonzero(keep)
+def shown_particles(ep, max_points: int) -> np.ndarray:
+    """Indices of at most ``max_points`` active particles (presence > 0), evenly spaced: the
+    ones every figure, report and viewer of a rollout draws."""
+    idx = np.flatnonzero(ep.particles.presence > 0)
     if len(idx) > max_points:
         idx = idx[np.linspace(0, len(idx) - 1, max_points).astype(int)]
+    return idx
+
+
+def box_edges(c: np.ndarray, h: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The 12 edges of the axis-aligned box of centre ``c`` and half-size ``h``."""
+    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    pts = np.asarray(c) + corners * np.asarray(h)
+    return [(pts[i], pts[j]) for i in range(8) for j in range(i + 1, 8)
+            if np.sum(corners[i] != corners[j]) == 1]
+
+
+def draw_frame(ax, ep, x: np.ndarray, cols, max_points: int, title: str | None) -> None:
+    """Draw one frame of a rollout (active particles, colliders, ground) on a 3-D axis."""
+    idx = shown_particles(ep, max_points)
     # the simulator's y is up: plot (x, z, y) so gravity points down the page
     ax.scatter(x[idx, 0], x[idx, 2], x[idx, 1], c=list(cols[idx]), s=1.5, depthshade=False,
                linewidths=0)
     for c, h in ep.scene.boxes:
-        _box(ax, np.asarray(c), np.asarray(h))
+        for a, b in box_edges(c, h):
+            ax.plot([a[0], b[0]], [a[2], b[2]], [a[1], b[1]], color="k", lw=0.6)
     size = ep.scene.size
     ax.set_xlim(0, size[0])
     ax.set_ylim(0, size[2])
@@ -54,16 +69,6 @@ def draw_frame(ax, ep, x: np.ndarray, cols, max_points: int, title: str | None) 
     ax.plot_surface(xx, zz, np.full_like(xx, g), color="#dddddd", alpha=0.4, linewidth=0)
     if title:
         ax.set_title(title, fontsize=8)
-
-
-def _box(ax, c: np.ndarray, h: np.ndarray) -> None:
-    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-    pts = c + corners * h
-    for i in range(8):
-        for j in range(i + 1, 8):
-            if np.sum(corners[i] != corners[j]) == 1:
-                a, b = pts[i], pts[j]
-                ax.plot([a[0], b[0]], [a[2], b[2]], [a[1], b[1]], color="k", lw=0.6)
 
 
 def _atomic_save(fig_or_writer, path: Path, save) -> Path:

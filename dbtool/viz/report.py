@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from dbtool.atomic import atomic_write_text
-from dbtool.viz.render import GROUP_COLOURS, particle_colours
+from dbtool.viz.render import GROUP_COLOURS, box_edges, particle_colours, shown_particles
 
 
 @dataclass
@@ -42,29 +42,6 @@ class Panel:
     curves: list[Curve] = field(default_factory=list)
 
 
-def _sample(ep, max_points: int) -> np.ndarray:
-    """Indices of at most ``max_points`` active particles, evenly spaced."""
-    idx = np.flatnonzero(ep.particles.presence > 0)
-    if len(idx) > max_points:
-        idx = idx[np.linspace(0, len(idx) - 1, max_points).astype(int)]
-    return idx
-
-
-def _box_lines(c: np.ndarray, h: np.ndarray) -> tuple[list, list, list]:
-    """Edges of an axis-aligned box as one polyline with gaps (plot coordinates x, z, y)."""
-    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-    pts = c + corners * h
-    xs, ys, zs = [], [], []
-    for i in range(8):
-        for j in range(i + 1, 8):
-            if np.sum(corners[i] != corners[j]) == 1:
-                a, b = pts[i], pts[j]
-                xs += [a[0], b[0], None]
-                ys += [a[2], b[2], None]
-                zs += [a[1], b[1], None]
-    return xs, ys, zs
-
-
 def _scene_traces(ep) -> list:
     """The ground plane and the box colliders (platform, obstacle, base) as static traces."""
     import plotly.graph_objects as go
@@ -74,7 +51,11 @@ def _scene_traces(ep) -> list:
                         z=[g] * 4, i=[0, 0], j=[1, 2], k=[2, 3], color="#cccccc",
                         opacity=0.4, name="ground", hoverinfo="skip")]
     for c, h in ep.scene.boxes:
-        xs, ys, zs = _box_lines(np.asarray(c), np.asarray(h))
+        xs, ys, zs = [], [], []  # one polyline with gaps, plot coordinates (x, z, y)
+        for a, b in box_edges(c, h):
+            xs += [a[0], b[0], None]
+            ys += [a[2], b[2], None]
+            zs += [a[1], b[1], None]
         traces.append(go.Scatter3d(x=xs, y=ys, z=zs, mode="lines", name="collider",
                                    line={"color": "black", "width": 2}, hoverinfo="skip",
                                    showlegend=False))
@@ -102,7 +83,7 @@ def rollout_figure(ep, positions: np.ndarray, title: str, every: int = 5,
     one animation frame per ``every`` control steps, a play button and a step slider."""
     import plotly.graph_objects as go
 
-    idx = _sample(ep, max_points)
+    idx = shown_particles(ep, max_points)
     cols = particle_colours(ep)[idx]
     steps = list(range(0, len(positions), every))
     if steps[-1] != len(positions) - 1:
@@ -134,7 +115,7 @@ def design_figure(ep, title: str, max_points: int = 8000):
     """The design at rest in its task scene, rotatable, one trace per actuator group."""
     import plotly.graph_objects as go
 
-    idx = _sample(ep, max_points)
+    idx = shown_particles(ep, max_points)
     cols = particle_colours(ep)[idx]
     x = ep.particles.x0[idx]
     traces = []

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dbtool.errors import InputError, RunError
-from dbtool.viz.render import particle_colours
+from dbtool.viz.render import particle_colours, shown_particles
 
 COLOUR_MODES = ("actuator group", "stiffness", "presence")
 EXTRA = "pip install 'dbtool[viewer]'"
@@ -96,9 +96,7 @@ def serve(ep, positions: np.ndarray, metric: float, title: str, host: str = "127
     return at once; :meth:`DesignView.stop` ends it."""
     viser = require_viser()
     check_port(host, port)
-    idx = np.flatnonzero(ep.particles.presence > 0)
-    if len(idx) > max_points:
-        idx = idx[np.linspace(0, len(idx) - 1, max_points).astype(int)]
+    idx = shown_particles(ep, max_points)
     server = viser.ViserServer(host=host, port=port, label=f"dbtool: {title}", verbose=False)
     server.scene.set_up_direction("+y")
     size, g = np.asarray(ep.scene.size, float), ep.scene.ground_y
