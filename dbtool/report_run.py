@@ -1,33 +1,56 @@
-"""``dbtool report PATH``: the self-contained ``report.html`` of a design or an export.
+"""``dbtool report PATH``: the self-contained ``report.html`` of a design, an export or a
+comparison (docs/viewing.md).
 
-PATH is an export folder (``dbtool export``'s: :mod:`dbtool.export.reports.page`), a
-``dbtool design`` run directory (its ``design.npz``, ``config.json``,
-``manifest.json`` and ``metrics.jsonl`` are read) or a ``design.npz``; the design is simulated
-again with its own controller for the rollout, and the report goes next to the design
-(:func:`dbtool.codesign.design_run.write_run_report`, :mod:`dbtool.viz.report`).
+PATH is one of four kinds (:func:`path_kind`, shared with ``dbtool view``): an export folder
+(``dbtool export``'s: :mod:`dbtool.export.reports.page`), a comparison folder (``dbtool
+compare``'s: :mod:`dbtool.compare.page`), a ``dbtool design`` run directory (its
+``design.npz``, ``config.json``, ``manifest.json`` and ``metrics.jsonl`` are read) or a
+``design.npz``. A design is simulated again with its own controller for the rollout, and its
+report goes next to it (:func:`dbtool.codesign.design_run.write_run_report`,
+:mod:`dbtool.viz.report`).
 """
 
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
-from dbtool.errors import InputError, MissingFileError
+from dbtool.errors import InputError, MissingFileError, PathError
+
+KINDS = {"run": "a design run (holding design.npz)", "design": "a design file (.npz)",
+         "export": "an export folder (report.json and report.md)",
+         "comparison": "a comparison folder (compare.json)"}
+
+
+def path_kind(path: str | Path) -> str:
+    """Which of :data:`KINDS` PATH is, checked before any work: a missing, unreadable or
+    unknown PATH is a one-line error."""
+    from dbtool.export.reports.page import is_export
+
+    path = Path(path)
+    if not path.exists():
+        raise MissingFileError(f"{path} does not exist")
+    if not os.access(path, os.R_OK | (os.X_OK if path.is_dir() else 0)):
+        raise PathError(f"{path} cannot be read (permission denied)")
+    if path.is_dir():
+        if is_export(path):
+            return "export"
+        if (path / "compare.json").is_file():
+            return "comparison"
+        if (path / "design.npz").is_file():
+            return "run"
+    elif path.suffix == ".npz":
+        return "design"
+    raise InputError(f"{path} is none of the kinds dbtool shows: {', '.join(KINDS.values())}")
 
 
 def design_file(path: str | Path) -> Path:
     """The design file of PATH (a run directory or a ``.npz``), checked before any work."""
-    path = Path(path)
-    if not path.exists():
-        raise MissingFileError(f"{path} does not exist")
-    if path.is_dir():
-        if not (path / "design.npz").is_file():
-            raise InputError(f"{path} is neither an export folder nor a design run: it holds no "
-                             "report.json or design.npz")
-        return path / "design.npz"
-    if path.suffix != ".npz":
-        raise InputError(f"{path} is neither a design run directory nor a design file (.npz)")
-    return path
+    kind = path_kind(path)
+    if kind not in ("run", "design"):
+        raise InputError(f"{path} is {KINDS[kind]}, not a design run or design file")
+    return Path(path) / "design.npz" if kind == "run" else Path(path)
 
 
 def replay(file: Path):

@@ -1,7 +1,12 @@
-"""``dbtool view PATH``: the viewer of a design run or design file (docs/viewing.md).
+"""``dbtool view PATH``: the local web viewer of a design, a design run, an export or a
+comparison (docs/viewing.md).
 
-The design is simulated again with its own controller (as for ``report.html``), then
-:func:`dbtool.viz.viewer.serve` shows it until the process is stopped.
+PATH's kind is found first (:func:`dbtool.report_run.path_kind`); then the extra and the port
+are checked, so that bad input fails at once with one line. A design is simulated again with
+its own controller (as for ``report.html``) and shown by :func:`dbtool.viz.viewer.serve`, with
+a design run's buffer and co-design trajectory (:mod:`dbtool.viz.viewer_run`); an export
+folder is shown by :mod:`dbtool.viz.viewer_export` and a comparison by
+:mod:`dbtool.viz.viewer_compare`. The viewer runs until the process is stopped.
 """
 
 from __future__ import annotations
@@ -12,14 +17,29 @@ LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
 
 def view_run(path: str | Path, host: str = "127.0.0.1", port: int = 8080):
-    """Check PATH, the extra and the port, simulate the design, start the viewer; returns the
-    :class:`~dbtool.viz.viewer.DesignView` (its ``url``)."""
-    from dbtool.report_run import design_file, replay
+    """Check PATH, the extra and the port, then start the viewer of PATH's kind; returns the
+    running view (its ``url``, ``stop()``)."""
+    from dbtool.report_run import path_kind, replay
     from dbtool.viz.viewer import check_port, require_viser, serve
 
-    file = design_file(path)
+    path = Path(path)
+    kind = path_kind(path)
     require_viser()
     check_port(host, port)
+    if kind == "export":
+        from dbtool.viz.viewer_export import serve_export
+
+        return serve_export(path, host, port)
+    if kind == "comparison":
+        from dbtool.viz.viewer_compare import serve_comparison
+
+        return serve_comparison(path, host, port)
+    file = path / "design.npz" if kind == "run" else path
     _design, task, ro = replay(file)
+    extras = None
+    if kind == "run":
+        from dbtool.viz.viewer_run import run_extras
+
+        extras = run_extras(path)
     return serve(ro.episode, ro.positions, ro.metric, f"{task.title}: {file.parent.name}",
-                 host, port)
+                 host, port, extras=extras)

@@ -1,8 +1,10 @@
 """``dbtool report``: one self-contained report.html per design (docs/viewing.md)."""
 
+import os
 import re
 import shutil
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -43,9 +45,11 @@ def test_the_report_holds_the_design_the_rollout_and_the_metric(report):
 
 @pytest.mark.parametrize("make, message", [
     (lambda tmp: tmp / "absent", "does not exist"),
-    (lambda tmp: tmp, "neither an export folder nor a design run"),
+    (lambda tmp: tmp, "is none of the kinds dbtool shows"),
     (lambda tmp: (tmp / "notes.txt", (tmp / "notes.txt").write_text("x"))[0],
-     "neither a design run directory nor a design file"),
+     "is none of the kinds dbtool shows"),
+    (lambda tmp: (tmp / "design.npz", (tmp / "design.npz").write_bytes(b"PK\x03\x04"))[0],
+     "is not a design file"),
 ])
 def test_bad_paths_are_one_line_errors_and_write_nothing(tmp_path, make, message):
     path = make(tmp_path)
@@ -54,6 +58,17 @@ def test_bad_paths_are_one_line_errors_and_write_nothing(tmp_path, make, message
     assert out.returncode == 2 and message in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
     assert sorted(tmp_path.rglob("*")) == before
+
+
+def test_an_unreadable_path_is_a_one_line_error(tmp_path, monkeypatch):
+    """As for a folder without read permission (simulated: the tests may run as root)."""
+    import dbtool.report_run
+
+    denied = SimpleNamespace(access=lambda *_a: False, R_OK=os.R_OK, X_OK=os.X_OK)
+    monkeypatch.setattr(dbtool.report_run, "os", denied)
+    out = run_cli("report", str(tmp_path))
+    assert out.returncode == 2 and "cannot be read (permission denied)" in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1 and not any(tmp_path.iterdir())
 
 
 def test_an_export_folder_gets_its_own_report(tmp_path):

@@ -72,7 +72,7 @@ def test_bad_paths_and_a_missing_extra_are_one_line_errors(tmp_path, monkeypatch
     out = run_cli("view", str(tmp_path / "absent.npz"))
     assert out.returncode == 2 and "does not exist" in out.stderr
     out = run_cli("view", str(tmp_path))
-    assert out.returncode == 2 and "neither an export folder nor a design run" in out.stderr
+    assert out.returncode == 2 and "is none of the kinds dbtool shows" in out.stderr
     shutil.copy(DESIGN, tmp_path)
     monkeypatch.setitem(sys.modules, "viser", None)  # as if the extra were not installed
     out = run_cli("view", str(tmp_path / "design.npz"))

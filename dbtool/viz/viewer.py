@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import socket
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -71,7 +71,8 @@ class DesignView:
     colour: object  # the colour-mode dropdown
     playing: object  # the play checkbox
     points: object  # the particle cloud's handle
-    halt: threading.Event  # stops the player
+    halt: threading.Event  # stops the player(s)
+    extra: dict = field(default_factory=dict)  # handles of the extras, by name
 
     def stop(self) -> None:
         self.halt.set()
@@ -90,28 +91,69 @@ def colours(ep, mode: str, idx: np.ndarray) -> np.ndarray:
     raise InputError(f"colour mode must be one of {', '.join(COLOUR_MODES)}; got {mode!r}")
 
 
-def serve(ep, positions: np.ndarray, metric: float, title: str, host: str = "127.0.0.1",
-          port: int = 8080, max_points: int = 20_000) -> DesignView:
-    """Start the viewer of one rollout (``positions``: control steps x particles x 3) and
-    return at once; :meth:`DesignView.stop` ends it."""
+def open_server(host: str, port: int, title: str, up: str = "+y"):
+    """A viser server on ``host:port`` (checked first: a port in use is a one-line error),
+    labelled ``dbtool: title``, with ``up`` as the scene's up direction."""
     viser = require_viser()
     check_port(host, port)
-    idx = shown_particles(ep, max_points)
     server = viser.ViserServer(host=host, port=port, label=f"dbtool: {title}", verbose=False)
-    server.scene.set_up_direction("+y")
-    size, g = np.asarray(ep.scene.size, float), ep.scene.ground_y
-    centre = positions[0][idx].mean(0)
-    reach = float(np.ptp(positions[0][idx], axis=0).max())
+    server.scene.set_up_direction(up)
+    return server
+
+
+def url_of(server, host: str) -> str:
+    """The URL a browser on this machine opens for ``server``."""
+    shown = "127.0.0.1" if host in ("0.0.0.0", "") else host
+    return f"http://{shown}:{server.get_port()}"
+
+
+def add_task_scene(server, scene, prefix: str = "/scene", offset=(0.0, 0.0, 0.0)) -> list:
+    """The task scene's ground and box colliders (platform, obstacle, base plate) under
+    ``prefix``, moved by ``offset``; returns their handles."""
+    size, g = np.asarray(scene.size, float), scene.ground_y
+    o = np.asarray(offset, float)
+    handles = [server.scene.add_box(f"{prefix}/ground", color=(200, 200, 200),
+                                    dimensions=(size[0], 1e-4, size[2]),
+                                    position=tuple(o + (size[0] / 2, g, size[2] / 2)))]
+    for k, (c, h) in enumerate(scene.boxes):
+        handles.append(server.scene.add_box(f"{prefix}/collider{k}", color=(60, 60, 60),
+                                            opacity=0.35,
+                                            dimensions=tuple(2 * np.asarray(h, float)),
+                                            position=tuple(o + np.asarray(c, float))))
+    return handles
+
+
+def aim_camera(server, points: np.ndarray, direction=(1.1, 0.7, -1.4)) -> None:
+    """Point the initial camera at ``points`` from ``direction`` (scaled by their extent)."""
+    centre = points.mean(0)
+    reach = float(np.ptp(points, axis=0).max())
     server.initial_camera.look_at = tuple(centre)
-    server.initial_camera.position = tuple(centre + reach * np.array([1.1, 0.7, -1.4]))
+    server.initial_camera.position = tuple(centre + reach * np.asarray(direction, float))
     server.initial_camera.up = (0.0, 1.0, 0.0)
-    server.scene.add_box("/scene/ground", color=(200, 200, 200),
-                         dimensions=(size[0], 1e-4, size[2]),
-                         position=(size[0] / 2, g, size[2] / 2))
-    for k, (c, h) in enumerate(ep.scene.boxes):
-        server.scene.add_box(f"/scene/collider{k}", color=(60, 60, 60), opacity=0.35,
-                             dimensions=tuple(2 * np.asarray(h, float)),
-                             position=tuple(np.asarray(c, float)))
+
+
+def start_player(slider, n: int, halt: threading.Event, playing, period: float = 0.08
+                 ) -> None:
+    """Advance ``slider`` (values ``0 .. n - 1``, cyclically) every ``period`` seconds while
+    ``playing`` is checked, until ``halt`` is set."""
+
+    def player() -> None:
+        while not halt.wait(period):
+            if playing.value:
+                slider.value = (int(slider.value) + 1) % n
+
+    threading.Thread(target=player, daemon=True).start()
+
+
+def serve(ep, positions: np.ndarray, metric: float, title: str, host: str = "127.0.0.1",
+          port: int = 8080, max_points: int = 20_000, extras=None) -> DesignView:
+    """Start the viewer of one rollout (``positions``: control steps x particles x 3) and
+    return at once; :meth:`DesignView.stop` ends it. ``extras(server, view)`` adds more
+    (a design run's buffer and co-design trajectory, :mod:`dbtool.viz.viewer_run`)."""
+    idx = shown_particles(ep, max_points)
+    server = open_server(host, port, title)
+    aim_camera(server, positions[0][idx])
+    add_task_scene(server, ep.scene)
     dx = ep.scene.dx
     cloud = server.scene.add_point_cloud("/robot", points=positions[0][idx].astype(np.float32),
                                          colors=colours(ep, COLOUR_MODES[0], idx),
@@ -131,13 +173,8 @@ def serve(ep, positions: np.ndarray, metric: float, title: str, host: str = "127
         cloud.points = positions[int(step.value)][idx].astype(np.float32)
 
     halt = threading.Event()
-
-    def player() -> None:
-        while not halt.wait(0.08):
-            if playing.value:
-                step.value = (int(step.value) + 1) % len(positions)
-
-    threading.Thread(target=player, daemon=True).start()
-    shown = "127.0.0.1" if host in ("0.0.0.0", "") else host
-    return DesignView(server, f"http://{shown}:{server.get_port()}", step, colour, playing,
-                      cloud, halt)
+    start_player(step, len(positions), halt, playing)
+    view = DesignView(server, url_of(server, host), step, colour, playing, cloud, halt)
+    if extras is not None:
+        extras(server, view)
+    return view
