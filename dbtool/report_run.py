@@ -69,11 +69,17 @@ def replay(file: Path):
 
 def report_run(path: str | Path) -> Path:
     """Write ``report.html`` for PATH: an export folder's (its parts, tendons and assembly
-    sheet), or beside the design of a run directory or design file; returns its path."""
-    from dbtool.export.reports.page import is_export, write_export_page
+    sheet), a comparison folder's (its table, figures and robots), or beside the design of a
+    run directory or design file; returns its path."""
+    kind = path_kind(path)
+    if kind == "export":
+        from dbtool.export.reports.page import write_export_page
 
-    if Path(path).is_dir() and is_export(Path(path)):
         return write_export_page(path)
+    if kind == "comparison":
+        from dbtool.compare.page import write_comparison_page
+
+        return write_comparison_page(path)
     from dbtool.atomic import check_writable
     from dbtool.codesign.design_run import write_run_report
 

@@ -4,9 +4,9 @@ comparison (docs/viewing.md).
 PATH's kind is found first (:func:`dbtool.report_run.path_kind`); then the extra and the port
 are checked, so that bad input fails at once with one line. A design is simulated again with
 its own controller (as for ``report.html``) and shown by :func:`dbtool.viz.viewer.serve`, with
-a design run's buffer and co-design trajectory (:mod:`dbtool.viz.viewer_run`); an export
-folder is shown by :mod:`dbtool.viz.viewer_export` and a comparison by
-:mod:`dbtool.viz.viewer_compare`. The viewer runs until the process is stopped.
+a design run's buffer and co-design trajectory (:mod:`dbtool.view.design_run`); an export
+folder is shown by :mod:`dbtool.view.export_folder` and a comparison by
+:mod:`dbtool.view.comparison`. The viewer runs until the process is stopped.
 """
 
 from __future__ import annotations
@@ -27,18 +27,18 @@ def view_run(path: str | Path, host: str = "127.0.0.1", port: int = 8080):
     require_viser()
     check_port(host, port)
     if kind == "export":
-        from dbtool.viz.viewer_export import serve_export
+        from dbtool.view.export_folder import serve_export
 
         return serve_export(path, host, port)
     if kind == "comparison":
-        from dbtool.viz.viewer_compare import serve_comparison
+        from dbtool.view.comparison import serve_comparison
 
         return serve_comparison(path, host, port)
     file = path / "design.npz" if kind == "run" else path
     _design, task, ro = replay(file)
     extras = None
     if kind == "run":
-        from dbtool.viz.viewer_run import run_extras
+        from dbtool.view.design_run import run_extras
 
         extras = run_extras(path)
     return serve(ro.episode, ro.positions, ro.metric, f"{task.title}: {file.parent.name}",

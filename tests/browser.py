@@ -117,6 +117,12 @@ class Browser:
         data = base64.b64decode(self.call("Page.captureScreenshot", format="png")["data"])
         return iio.imread(io.BytesIO(data))[..., :3].astype(float).mean(-1)
 
+    def save_screenshot(self, path) -> None:
+        """The page as a colour PNG at ``path`` (the docs' screenshots)."""
+        data = base64.b64decode(self.call("Page.captureScreenshot", format="png")["data"])
+        with open(path, "wb") as fh:
+            fh.write(data)
+
     def settle(self, ready, timeout: float = 90.0) -> np.ndarray:
         """Screenshots every second until ``ready(screenshot)`` holds (a loaded machine draws
         slowly); returns the last one, which the caller asserts on."""

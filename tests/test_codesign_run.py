@@ -53,6 +53,12 @@ def test_codesign_sampler_logs_both_terms_and_co_optimises_the_controller(prior)
         assert r["applied_rms"] <= cfg.renorm * (1 + 1e-5)
         assert np.isfinite(r["metric"]) and r["score_rms"] > 0
     assert res.cloud.shape == (1024, 3) and np.isfinite(res.cloud).all()
+    # the trajectory: x_t after each stop's steps and its x0-estimate, which at t = 0 is x_t
+    assert [s.t for s in res.trajectory] == [200, 100, 0]
+    last = res.trajectory[-1]
+    assert np.abs(last.xt - res.cloud).max() < 0.02  # one denoising step from the sample
+    assert np.abs(last.x0 - last.xt).max() < 0.05 < np.abs(
+        res.trajectory[0].x0 - res.trajectory[0].xt).max()
     assert res.controller.shape == (STEPS, task.n_groups)
     assert not np.allclose(res.controller, task.controller(STEPS))  # phi moved
     assert np.abs(res.controller).max() <= 1.0
@@ -150,7 +156,13 @@ def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp
     da = a.run(show_progress=False)
     files = {p.name for p in (tmp_path / "a").iterdir()}
     assert {"config.json", "manifest.json", "metrics.jsonl", "checkpoint.pt", "best.npz",
-            "design.npz", "performance.png", "montage.png"} <= files
+            "trajectory.npz", "design.npz", "performance.png", "montage.png"} <= files
+    with np.load(tmp_path / "a" / "trajectory.npz") as t:
+        traj_a = {k: t[k] for k in t.files}
+    assert list(traj_a["t"]) == [400, 200, 0] and list(traj_a["sample"]) == [0]
+    assert traj_a["xt"].shape == traj_a["x0"].shape == (1, 3, 1024, 3)
+    kept = DesignRun.resume(tmp_path / "a", prior).state.samples[0]["trajectory"]  # checkpoint
+    np.testing.assert_array_equal(kept["x0"], traj_a["x0"][0])
     assert not [f for f in files if f.startswith(".")]  # no temp file left behind
     config = json.loads((tmp_path / "a" / "config.json").read_text())
     man = json.loads((tmp_path / "a" / "manifest.json").read_text())
@@ -188,6 +200,9 @@ def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp
     np.testing.assert_array_equal(db.surface, da.surface)
     rows_b = [json.loads(line) for line in (tmp_path / "b" / "metrics.jsonl").open()]
     assert rows_b == rows
+    with np.load(tmp_path / "b" / "trajectory.npz") as t:
+        for k, v in traj_a.items():
+            np.testing.assert_array_equal(t[k], v)
 
     # a finished run refuses to be overwritten
     with pytest.raises(RunDirectoryError, match="already holds a run"):

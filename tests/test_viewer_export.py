@@ -79,7 +79,7 @@ def _screenshot(b: Browser, view) -> None:
 def test_the_cut_is_closed_and_opens_the_channels(view):
     """The cut is manifold3d's: the cut finger is a closed solid that ends at the plane, and
     its cut face has a hole where each of the finger's channels crosses the plane."""
-    from dbtool.viz.viewer_export import centreline
+    from dbtool.view.export_folder import centreline
 
     view.cut.value = False
     whole = _mesh(view.parts["finger"])
@@ -149,7 +149,7 @@ def test_a_body_export_shows_its_parts(tmp_path):
     from dbtool.export.assembly import ExportConfig, export_design
     from dbtool.robotize.actuators import reference_robot
     from dbtool.sim.tasks import get_task
-    from dbtool.viz.viewer_export import serve_export
+    from dbtool.view.export_folder import serve_export
 
     task = get_task("balancing")
     design = Design("balancing", reference_robot(task, "star"), task.controller())

@@ -9,6 +9,7 @@ Files of a run (each written atomically: temp file, then rename)::
     metrics.jsonl    one row per epoch and per co-design Langevin step
     checkpoint.pt    state after the last completed epoch / co-designed sample
     best.npz         the best designs of all embedding epochs (clouds, metrics)
+    trajectory.npz   each co-designed sample's x_t and x0-estimate at every Langevin stop
     design.npz       the final robot (upsampled cloud, fields, controller, metric)
     performance.png  performance per epoch and along co-design
     montage.png      the final robot in motion
@@ -65,8 +66,8 @@ def guidance_terms(prior, c: torch.Tensor, guidance: float, prompt: str | None =
 def codesign_design(prior, task: Task, conds: list[tuple], cfg: CodesignConfig, seed: int,
                     steps: int, n_steps: int = N_STEPS, on_step=None) -> dict:
     """One design of diffusion as co-design (docs/method.md §5) and its score:
-    ``{"cloud", "metric", "controller", "stop"}``. The final sample is scored forward with
-    its co-optimised controller (NaN where it cannot be robotized or simulated); with
+    ``{"cloud", "metric", "controller", "stop", "trajectory"}``. The final sample is scored
+    forward with its co-optimised controller (NaN where it cannot be robotized or simulated); with
     ``cfg.handover == "best"`` the best design the chain simulated replaces it when it scored
     higher, and ``stop`` is the timestep that made it (None: the final sample)."""
     res = codesign_sample(prior, task, conds, cfg, seed=seed, steps=steps, n_steps=n_steps,
@@ -76,7 +77,17 @@ def codesign_design(prior, task: Task, conds: list[tuple], cfg: CodesignConfig, 
     b = res.best
     if cfg.handover == "best" and b is not None and not metric >= b.metric:
         out = {"cloud": b.cloud, "metric": b.metric, "controller": b.controller, "stop": b.t}
+    out["trajectory"] = trajectory_arrays(res.trajectory)
     return out
+
+
+def trajectory_arrays(stops: list) -> dict[str, np.ndarray]:
+    """A chain's co-design trajectory (:class:`~dbtool.codesign.langevin.Stop` list) as
+    arrays: ``t`` (S,), ``xt`` and ``x0`` (S, N, 3), float32."""
+    n = len(stops[0].xt) if stops else 0
+    return {"t": np.array([s.t for s in stops], np.int64),
+            "xt": np.array([s.xt for s in stops], np.float32).reshape(len(stops), n, 3),
+            "x0": np.array([s.x0 for s in stops], np.float32).reshape(len(stops), n, 3)}
 
 
 @dataclass
@@ -190,7 +201,9 @@ class DesignRun:
                   {"cloud": torch.as_tensor(s["cloud"]), "metric": s["metric"],
                    "stop": -1 if s.get("stop") is None else int(s["stop"]),
                    "controller": None if s["controller"] is None
-                   else torch.as_tensor(s["controller"])} for s in self.state.samples]}
+                   else torch.as_tensor(s["controller"]),
+                   **({"trajectory": {k: torch.as_tensor(v) for k, v in s["trajectory"].items()}}
+                      if s.get("trajectory") else {})} for s in self.state.samples]}
 
         def save(tmp: str) -> None:
             bio = io.BytesIO()
@@ -227,7 +240,9 @@ class DesignRun:
             run.state = State(int(ck["epoch"]), json.loads(ck["rows"]), [
                 {"cloud": s["cloud"].numpy(), "metric": float(s["metric"]),
                  "stop": None if int(s.get("stop", -1)) < 0 else int(s["stop"]),
-                 "controller": None if s["controller"] is None else s["controller"].numpy()}
+                 "controller": None if s["controller"] is None else s["controller"].numpy(),
+                 **({"trajectory": {k: v.numpy() for k, v in s["trajectory"].items()}}
+                    if "trajectory" in s else {})}
                 for s in ck["samples"]])
         except RunDirectoryError:
             raise
@@ -277,6 +292,7 @@ class DesignRun:
                 self.state.samples.append(sample)
                 self.log(phase="codesign", sample=k, final=True, metric=sample["metric"],
                          stop=sample["stop"])
+                self._save_trajectory()
                 self.checkpoint()
                 bar.update(1)
         return self.finish(report)
@@ -287,6 +303,18 @@ class DesignRun:
             _savez(self.path / "best.npz", clouds=np.stack([e.cloud for e in best]),
                    metrics=np.array([e.metric for e in best]),
                    epochs=np.array([e.epoch for e in best]))
+
+    def _save_trajectory(self) -> None:
+        """``trajectory.npz``: the co-designed samples' stops (``sample`` k's rows of ``xt``
+        and ``x0``: samples x stops x N x 3) and each sample's final metric."""
+        done = [(k, s) for k, s in enumerate(self.state.samples) if s.get("trajectory")
+                and len(s["trajectory"]["t"])]
+        if done:
+            _savez(self.path / "trajectory.npz", t=done[0][1]["trajectory"]["t"],
+                   sample=np.array([k for k, _ in done]),
+                   metric=np.array([s["metric"] for _, s in done], float),
+                   xt=np.stack([s["trajectory"]["xt"] for _, s in done]),
+                   x0=np.stack([s["trajectory"]["x0"] for _, s in done]))
 
     def finish(self, report: bool = True):
         """The run's :class:`Design`, plus the figures (and ``report.html``): the best

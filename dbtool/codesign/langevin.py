@@ -40,7 +40,8 @@ for the best ``a*`` (0 when none beats ``x0_hat``)::
 
 Every design the chain simulates is a candidate; with ``handover="best"`` the best of them
 (or the final sample, if it scores higher) is the design handed over, and the result says at
-which stop it was made.
+which stop it was made. The result's ``trajectory`` keeps x_t and its x0-estimate after each
+stop's Langevin steps (the co-design trajectory the viewer scrubs, docs/viewing.md).
 """
 
 from __future__ import annotations
@@ -120,11 +121,22 @@ class Candidate:
 
 
 @dataclass
+class Stop:
+    """The chain after the Langevin steps of one stop: x_t and its x0-estimate (the design
+    it is heading to), prior frame."""
+
+    t: int
+    xt: np.ndarray  # (N, 3)
+    x0: np.ndarray  # (N, 3)
+
+
+@dataclass
 class CodesignResult:
     cloud: np.ndarray  # (N, 3), prior frame
     controller: np.ndarray | None
     history: list[dict] = field(default_factory=list)
     best: Candidate | None = None  # the best design the chain simulated
+    trajectory: list[Stop] = field(default_factory=list)  # one entry per co-design stop
 
 
 def _keep(best: Candidate | None, x_model: torch.Tensor, metric: float,
@@ -223,6 +235,7 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
     gen = torch.Generator().manual_seed(seed + 7_919)
     at = stops(cfg)
     history: list[dict] = []
+    trajectory: list[Stop] = []
     last = None
     for step in prior.denoising_loop(conds, 1, steps, seed, include=at):
         last = step
@@ -245,5 +258,7 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
             if on_step is not None:
                 on_step(row)
         step.x = x
+        x0 = sched.predict_x0(x, t, guided_eps(prior.eps, x, t, conds))
+        trajectory.append(Stop(t, x[0].numpy() / SCALE, x0[0].numpy() / SCALE))
     cloud = last.x[0].numpy() / SCALE
-    return CodesignResult(cloud, chain.phi, history, chain.best)
+    return CodesignResult(cloud, chain.phi, history, chain.best, trajectory)

@@ -10,7 +10,7 @@ episode set-up takes milliseconds), so the page is quick to write; each cell kee
 (:mod:`dbtool.viz.report`) it embeds plotly.js once and needs no network.
 
 :func:`read_comparison` lists the cells (shared with the viewer,
-:mod:`dbtool.viz.viewer_compare`); :func:`write_comparison_page` writes the page.
+:mod:`dbtool.view.comparison`); :func:`write_comparison_page` writes the page.
 """
 
 from __future__ import annotations

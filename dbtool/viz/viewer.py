@@ -46,7 +46,7 @@ def check_port(host: str, port: int) -> None:
                              "choose another with --port") from None
 
 
-def _rgb(hex_colours) -> np.ndarray:
+def rgb(hex_colours) -> np.ndarray:
     return np.array([[int(h[i:i + 2], 16) for i in (1, 3, 5)] for h in hex_colours],
                     np.uint8)
 
@@ -72,6 +72,7 @@ class DesignView:
     playing: object  # the play checkbox
     points: object  # the particle cloud's handle
     halt: threading.Event  # stops the player(s)
+    ep: object = None  # the rollout's episode (its scene, particles at rest)
     extra: dict = field(default_factory=dict)  # handles of the extras, by name
 
     def stop(self) -> None:
@@ -83,7 +84,7 @@ def colours(ep, mode: str, idx: np.ndarray) -> np.ndarray:
     """RGB per shown particle for a colour mode of :data:`COLOUR_MODES`."""
     p = ep.particles
     if mode == "actuator group":
-        return _rgb(particle_colours(ep)[idx])
+        return rgb(particle_colours(ep)[idx])
     if mode == "stiffness":
         return _ramp(np.asarray(p.stiffness, float)[idx])
     if mode == "presence":
@@ -149,7 +150,7 @@ def serve(ep, positions: np.ndarray, metric: float, title: str, host: str = "127
           port: int = 8080, max_points: int = 20_000, extras=None) -> DesignView:
     """Start the viewer of one rollout (``positions``: control steps x particles x 3) and
     return at once; :meth:`DesignView.stop` ends it. ``extras(server, view)`` adds more
-    (a design run's buffer and co-design trajectory, :mod:`dbtool.viz.viewer_run`)."""
+    (a design run's buffer and co-design trajectory, :mod:`dbtool.view.design_run`)."""
     idx = shown_particles(ep, max_points)
     server = open_server(host, port, title)
     aim_camera(server, positions[0][idx])
@@ -174,7 +175,7 @@ def serve(ep, positions: np.ndarray, metric: float, title: str, host: str = "127
 
     halt = threading.Event()
     start_player(step, len(positions), halt, playing)
-    view = DesignView(server, url_of(server, host), step, colour, playing, cloud, halt)
+    view = DesignView(server, url_of(server, host), step, colour, playing, cloud, halt, ep)
     if extras is not None:
         extras(server, view)
     return view

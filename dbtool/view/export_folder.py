@@ -18,7 +18,6 @@ only; it does not import :mod:`dbtool.export`, which itself draws with :mod:`dbt
 from __future__ import annotations
 
 import json
-import math
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,9 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from dbtool.errors import InputError
-from dbtool.viz.viewer import aim_camera, open_server, url_of
+from dbtool.export.gripper.channel_path import fillet
+from dbtool.export.reports.page import ROLE_COLOURS
+from dbtool.viz.viewer import aim_camera, open_server, rgb, url_of
 
-ROLE_COLOURS = {"flexion": (31, 119, 180), "extension": (214, 39, 40)}  # as report.html's
 PART_COLOURS = {"finger": (224, 112, 32), "finger_mirror": (238, 176, 60),
                 "base": (140, 140, 140), "body": (224, 112, 32), "assembly": (224, 112, 32)}
 OTHER_COLOURS = ((214, 39, 40), (31, 119, 180), (44, 160, 44), (148, 103, 189),
@@ -75,37 +75,6 @@ def to_manifold(vertices: np.ndarray, faces: np.ndarray):
     return solid if solid.status() == m3.Error.NoError and not solid.is_empty() else None
 
 
-def rounded(corners: np.ndarray, radius: float, step: float = 0.5) -> np.ndarray:
-    """The polyline ``corners`` with each interior corner rounded by an arc of ``radius``
-    tangent to both segments, sampled every ``step`` mm: a channel's centreline. A segment
-    gives at most half its length to each end's corner (the first and last their whole
-    length), as the export's channels do."""
-    p = np.asarray(corners, float)
-    p = p[np.r_[True, np.linalg.norm(np.diff(p, axis=0), axis=1) > 1e-9]]
-    if len(p) < 3:
-        return p
-    length = np.linalg.norm(np.diff(p, axis=0), axis=1)
-    d = np.diff(p, axis=0) / length[:, None]
-    out = [p[0]]
-    for i in range(1, len(p) - 1):
-        cos_t = float(np.clip(d[i - 1] @ d[i], -1.0, 1.0))
-        theta = math.acos(cos_t)
-        n = d[i] - cos_t * d[i - 1]
-        if theta < math.radians(0.5) or np.linalg.norm(n) < 1e-12:
-            out.append(p[i])
-            continue
-        room = min(length[i - 1] * (1.0 if i == 1 else 0.5),
-                   length[i] * (1.0 if i == len(p) - 2 else 0.5))
-        r = min(radius, room / math.tan(theta / 2))
-        start = p[i] - d[i - 1] * r * math.tan(theta / 2)
-        inward = n / np.linalg.norm(n)
-        phi = np.linspace(0.0, theta, max(2, math.ceil(r * theta / step)) + 1)
-        out.extend(start + r * inward + r * (-np.cos(phi)[:, None] * inward
-                                             + np.sin(phi)[:, None] * d[i - 1]))
-    out.append(p[-1])
-    return np.asarray(out)
-
-
 def centreline(tendon: dict, bend_radius: float) -> np.ndarray:
     """A tendon's path (mm): the exit at the base's top, straight down past the root face to
     the lead, the routing points, the knot pocket; its corners rounded by ``bend_radius``."""
@@ -113,7 +82,7 @@ def centreline(tendon: dict, bend_radius: float) -> np.ndarray:
         "entry") else []
     pts = [tendon["exit"], *down, *tendon["points"], *([tendon["tip"]] if tendon.get("tip")
                                                        else [])]
-    return rounded(np.asarray(pts, float), bend_radius)
+    return fillet(np.asarray(pts, float), bend_radius).sample(0.5)
 
 
 def tube(path: np.ndarray, radius: float, sides: int = 12) -> tuple[np.ndarray, np.ndarray]:
@@ -367,7 +336,7 @@ def serve_export(folder: Path, host: str = "127.0.0.1", port: int = 8080) -> Exp
     radius = 0.5 * tj.get("channel_diameter_mm", 0.0) * CHANNEL_SHOWN
     for t in tendons:
         path = centreline(t, tj.get("bend_radius_mm", 0.0))
-        colour = ROLE_COLOURS.get(t.get("role"), (0, 0, 0))
+        colour = tuple(int(c) for c in rgb([ROLE_COLOURS.get(t.get("role"), "#000000")])[0])
         shown[f"/tendons/{t['name']}"] = _Path(server, f"/tendons/{t['name']}", path, colour)
         if radius > 0:
             shown[f"/channels/{t['name']}"] = _Shown(server, f"/channels/{t['name']}",
