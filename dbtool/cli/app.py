@@ -134,13 +134,15 @@ def design(
 
 @app.command("view")
 def view_command(
-    path: Path = typer.Argument(..., help="a design run directory or a design file (.npz)"),
+    path: Path = typer.Argument(..., help="a design run, a design file (.npz), an export "
+                                          "folder or a comparison folder"),
     host: str = typer.Option("127.0.0.1", help="address to bind (another exposes the viewer "
                                                "to the network)"),
     port: int = typer.Option(8080, min=1, max=65535, help="port of the viewer"),
 ) -> None:
-    """Start a local web viewer of a design and its rollout (docs/viewing.md); Ctrl-C stops
-    it. Needs the optional extra: pip install 'dbtool[viewer]'."""
+    """Start a local web viewer (docs/viewing.md) of a design and its rollout, a design run's
+    buffer and co-design trajectory, an export's parts with a cut plane or a comparison's
+    robots; Ctrl-C stops it. Needs the optional extra: pip install 'dbtool[viewer]'."""
     import time
 
     from dbtool.view_run import LOOPBACK, view_run
@@ -160,12 +162,13 @@ def view_command(
 
 @app.command("report")
 def report_command(
-    path: Path = typer.Argument(..., help="an export folder, a design run directory or a "
-                                          "design file (.npz)"),
+    path: Path = typer.Argument(..., help="a design run, a design file (.npz), an export "
+                                          "folder or a comparison folder"),
 ) -> None:
     """Write one self-contained report.html (no network needed): for a design, performance
     curves, the design in rotatable 3D, its rollout as an animation, config and manifest; for
-    an export, the assembly with its tendons in 3D, the parts' checks and the assembly sheet."""
+    an export, the assembly with its tendons in 3D, the parts' checks and the assembly sheet;
+    for a comparison, the table, its figures and the robots in 3D."""
     from dbtool.report_run import report_run
 
     with guarded():
