@@ -57,13 +57,17 @@ def test_the_colour_modes_colour_every_shown_particle(view):
     assert len(np.unique(np.asarray(view.points.colors), axis=0)) >= 2
 
 
-def test_a_port_in_use_is_a_one_line_error(tmp_path):
-    shutil.copy(DESIGN, tmp_path)
+@pytest.mark.parametrize("path", [DESIGN, DESIGN.parent, ROOT / "docs" / "results" /
+                                  "compare-quick", ROOT / "tests" / "data" /
+                                  "design-run-gripping"],
+                         ids=["design file", "export", "comparison", "design run"])
+def test_a_port_in_use_is_a_one_line_error(path):
+    """For every kind of PATH, before any work (the viewer writes nothing anywhere)."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         s.listen()
         port = s.getsockname()[1]
-        out = run_cli("view", str(tmp_path / "design.npz"), "--port", str(port))
+        out = run_cli("view", str(path), "--port", str(port))
     assert out.returncode == 2 and f"port {port} on 127.0.0.1 is not available" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
 

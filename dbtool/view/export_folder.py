@@ -11,8 +11,8 @@ the channel's diameter along them, and the mounting holes and alignment pins of
 The part files are stored in their print pose: the inverse of ``report.json``'s
 ``parts[name].print_pose.matrix`` puts each back into the assembly. The cut plane really cuts
 every solid (manifold3d's ``trim_by_plane``, about 0.1 s for the finger), so a cut part stays
-closed and the channels show as holes in its cut face. This module reads the export's files
-only; it does not import :mod:`dbtool.export`, which itself draws with :mod:`dbtool.viz`.
+closed and the channels show as holes in its cut face. The tendon paths are rounded by the
+export's own fillet (:func:`dbtool.export.gripper.channel_path.fillet`).
 """
 
 from __future__ import annotations
