@@ -102,3 +102,42 @@ def test_the_run_views_are_drawn_in_the_browser(view):
             b.save_screenshot(ROOT / "docs" / "img" / "viewer-trajectory.png")
         assert b.errors() == []
     _show(view, "rollout")
+
+
+def test_a_run_that_scores_x_t_shows_x_t_robotized(tmp_path):
+    """``target = "xt"``: the chain robotized x_t itself (noise-aware), so that is the solid
+    shown beside it, and x_t lies on it."""
+    import json
+
+    from scipy.spatial import cKDTree
+
+    from dbtool.view_run import view_run
+
+    folder = tmp_path / RUN.name
+    shutil.copytree(RUN, folder)
+    config = json.loads((folder / "config.json").read_text())
+    config["codesign"]["target"] = "xt"
+    (folder / "config.json").write_text(json.dumps(config))
+    v = view_run(folder, "127.0.0.1", free_port())
+    try:
+        _show(v, "co-design trajectory")
+        labels = [h.text for h in v.extra["groups"]["co-design trajectory"]
+                  if getattr(h, "name", "").endswith("label_solid")]
+        assert labels == ["robotized x_t (noise-aware)"]
+        v.extra["stop"].value = 1  # t = 300: robotized with the noise level of t
+        noisy = np.asarray(v.extra["solid"].points)
+        assert len(noisy) > 100 and "t = 300" in v.extra["info"].content
+        with np.load(folder / "trajectory.npz") as t:
+            x0 = t["x0"][0, 1]
+        from dbtool.view.design_run import solid
+
+        other = solid(x0, v.ep.task)  # what a target = "x0" run shows there
+        assert len(other.idx) != len(noisy) or not np.allclose(
+            other.ep.particles.x0[other.idx], noisy)
+        v.extra["stop"].value = 4  # t = 0: x_t is the design and lies on its solid
+        solid_t0 = np.asarray(v.extra["solid"].points)
+        slot = np.array([-1.08 * v.ep.scene.size[0], 0.0, 0.0])
+        xt = np.asarray(v.extra["xt"].points) - slot
+        assert np.median(cKDTree(solid_t0).query(xt)[0]) < 1.5 * v.ep.scene.dx
+    finally:
+        v.stop()

@@ -9,14 +9,16 @@ and, from the run's files, two more views chosen by a switch:
   side in rows of four, labelled with its epoch and metric;
 * **the co-design trajectory** (``trajectory.npz``: x_t and its x0-estimate after the Langevin
   steps of each stop, docs/method.md §5), scrubbed by sample and stop: x_t as grey points
-  beside the robotized solid of its x0-estimate (the design the chain is heading to, the one
-  the physics gradient scores), both in the task's workspace.
+  beside the solid the chain scored there, both in the task's workspace: the robotized
+  x0-estimate (the design x_t is heading to; the run's default ``target = "x0"``), or x_t
+  itself robotized noise-aware for a run with ``target = "xt"``.
 
 Designs are robotized when first shown (a few seconds each on a laptop CPU) and kept.
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,13 +44,15 @@ class Solid:
     error: str | None = None
 
 
-def solid(cloud: np.ndarray, task, max_points: int = 6000) -> Solid:
-    """Robotize ``cloud`` (prior frame) for ``task``, keeping the robotizer's placement
-    (prior frame to workspace) plus the task's origin as the map to the world."""
+def solid(cloud: np.ndarray, task, max_points: int = 6000, noise: float | None = None
+          ) -> Solid:
+    """Robotize ``cloud`` (prior frame) for ``task`` (noise-aware at ``noise``, docs/method.md
+    §2), keeping the robotizer's placement (prior frame to workspace) plus the task's origin
+    as the map to the world."""
     from dbtool.robotize import RobotizeError, robotize
 
     try:
-        r = robotize(np.asarray(cloud, float), task)
+        r = robotize(np.asarray(cloud, float), task, noise=noise)
         ep = task.episode(r.robot.compact())
     except (RobotizeError, ValueError) as exc:
         return Solid(None, None, None, str(exc).splitlines()[0][:120])
@@ -58,7 +62,7 @@ def solid(cloud: np.ndarray, task, max_points: int = 6000) -> Solid:
 
 
 ROW = 4  # designs per row of the buffer's grid
-XT_SLOT = -1  # x_t is drawn one slot to the left of its robotized x0-estimate
+XT_SLOT = -1  # x_t is drawn one slot to the left of the solid scored at its stop
 
 
 def run_extras(folder: Path):
@@ -78,6 +82,10 @@ def run_extras(folder: Path):
     if buffer is None and traj is None:
         return None
     task = get_task(Design.load(folder / "design.npz").task)
+    if traj is not None:  # the design the chain scored: the x0-estimate's, or x_t's own
+        config = folder / "config.json"
+        config = json.loads(config.read_text()) if config.is_file() else {}
+        traj["target"] = (config.get("codesign") or {}).get("target", "x0")
 
     def extras(server, view) -> None:
         add_run_views(server, view, task, buffer, traj)
@@ -93,9 +101,9 @@ def add_run_views(server, view, task, buffer: dict | None, traj: dict | None) ->
     scene = view.ep.scene
     cache: dict = {}
 
-    def robot(key, cloud) -> Solid:
+    def robot(key, cloud, noise: float | None = None) -> Solid:
         if key not in cache:
-            cache[key] = solid(cloud, task)
+            cache[key] = solid(cloud, task, noise=noise)
         return cache[key]
 
     groups: dict[str, list] = {VIEWS[0]: [view.points]}
@@ -181,8 +189,13 @@ def _aim_at(server, position, look_at) -> None:
 
 
 def _add_trajectory(server, view, scene, traj: dict, robot) -> list:
-    """x_t (grey, beside) and the robotized x0-estimate (in the task scene, coloured by
-    actuator group) at one stop of one sample, with their sliders."""
+    """x_t (grey, beside) and the solid the chain scored there (in the task scene, coloured by
+    actuator group) at one stop of one sample, with their sliders: the robotized x0-estimate,
+    or x_t robotized noise-aware for a run with ``target = "xt"`` (docs/method.md §5)."""
+    from dbtool.prior.sampling.diffusion import noise_std
+
+    on_xt = traj.get("target") == "xt"
+    scored, what = (traj["xt"], "x_t (noise-aware)") if on_xt else (traj["x0"], "x0-estimate")
     offset = XT_SLOT * _slot(1, scene)
     handles = add_task_scene(server, scene, "/trajectory/xt_scene", offset)
     ts, samples, metrics = traj["t"], traj["sample"], traj["metric"]
@@ -203,7 +216,7 @@ def _add_trajectory(server, view, scene, traj: dict, robot) -> list:
                                                point_shape="circle")
     at = _label_at(scene)
     handles += [xt_cloud, solid_cloud,
-                server.scene.add_label("/trajectory/label_solid", "robotized x0-estimate",
+                server.scene.add_label("/trajectory/label_solid", f"robotized {what}",
                                        position=tuple(at)),
                 server.scene.add_label("/trajectory/label_xt", "x_t",
                                        position=tuple(offset + at))]
@@ -211,13 +224,14 @@ def _add_trajectory(server, view, scene, traj: dict, robot) -> list:
     def show(_event=None) -> None:
         k = min(int(which.value), n_samples - 1)
         j = min(int(stop.value), n_stops - 1)
-        s = robot(("trajectory", k, j), traj["x0"][k][j])
+        noise = noise_std(int(ts[j])) if on_xt and ts[j] > 0 else None
+        s = robot(("trajectory", k, j), scored[k][j], noise)
         line = (f"sample {int(samples[k])}, stop {j + 1} of {n_stops}: t = {int(ts[j])}  \n"
                 f"final metric of the sample {float(metrics[k]):.4g}")
         if s.ep is None:  # x_t borrows the placement of the sample's final stop
             solid_cloud.points = empty
-            info.content = line + f"  \nx0-estimate not robotized: {s.error}"
-            s = robot(("trajectory", k, n_stops - 1), traj["x0"][k][-1])
+            info.content = line + f"  \n{what} not robotized: {s.error}"
+            s = robot(("trajectory", k, n_stops - 1), scored[k][-1])
         else:
             solid_cloud.points = s.ep.particles.x0[s.idx].astype(np.float32)
             solid_cloud.colors = colours(s.ep, COLOUR_MODES[0], s.idx)
