@@ -4,15 +4,15 @@ The scene is the assembly in the export's frame (mm, y up, the base on top): eve
 mesh in its own colour with a checkbox (a gripper's ``finger``, ``finger_mirror`` and
 ``base``; a body export's ``body`` and actuator regions), the tendon paths of
 ``tendons.json`` as polylines coloured by role (from the tube seat at the base's top down
-through the channel's rounded bends to the knot pocket), the channels as translucent tubes of
-the channel's diameter along them, and the mounting holes and alignment pins of
-``report.json`` as small cylinders.
+through the channel's rounded bends to the knot pocket), the channels as translucent solids
+built as the export cuts them, and the mounting holes and alignment pins of ``report.json``
+as small cylinders.
 
 The part files are stored in their print pose: the inverse of ``report.json``'s
 ``parts[name].print_pose.matrix`` puts each back into the assembly. The cut plane really cuts
 every solid (manifold3d's ``trim_by_plane``, about 0.1 s for the finger), so a cut part stays
-closed and the channels show as holes in its cut face. The tendon paths are rounded by the
-export's own fillet (:func:`dbtool.export.gripper.channel_path.fillet`).
+closed and the channels show as holes in its cut face. The tendons' corners, their fillet,
+the channel tube and the cylinders are the export's own (:mod:`dbtool.export.gripper`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,11 @@ from pathlib import Path
 import numpy as np
 
 from dbtool.errors import InputError
+from dbtool.export._manifold import from_arrays, manifold3d, mesh_arrays
 from dbtool.export.gripper.channel_path import fillet
+from dbtool.export.gripper.channels import tube
+from dbtool.export.gripper.mounting import vertical_cylinder
+from dbtool.export.gripper.tendons import Tendon
 from dbtool.export.reports.page import ROLE_COLOURS
 from dbtool.viz.viewer import aim_camera, open_server, rgb, url_of
 
@@ -38,12 +42,6 @@ AXES = ("x", "y", "z")
 TOWARD = (0.65, 0.55, -0.85)  # the initial camera's direction from the assembly
 CHANNEL_SHOWN = 0.97  # the channel tubes are drawn this much thinner than the channel, so
 # their surface does not fight the channel's wall in the depth buffer
-
-
-def _m3():
-    import manifold3d
-
-    return manifold3d
 
 
 def load_parts(folder: Path, report: dict) -> dict:
@@ -68,52 +66,28 @@ def load_parts(folder: Path, report: dict) -> dict:
 
 def to_manifold(vertices: np.ndarray, faces: np.ndarray):
     """A manifold3d solid of a closed mesh, or None when the mesh is not a manifold."""
-    m3 = _m3()
-    solid = m3.Manifold(m3.Mesh(
-        vert_properties=np.array(np.asarray(vertices)[:, :3], np.float32, order="C"),
-        tri_verts=np.array(faces, np.uint32, order="C")))  # writable copies, as it needs
-    return solid if solid.status() == m3.Error.NoError and not solid.is_empty() else None
+    solid = from_arrays(np.asarray(vertices)[:, :3], faces)
+    return solid if solid.status() == manifold3d.Error.NoError and not solid.is_empty() \
+        else None
+
+
+def corners(tendon: dict) -> np.ndarray:
+    """A tendon's centreline corners from its ``tendons.json`` entry (:meth:`Tendon.corners`:
+    the exit at the base's top, down past the root face, the routing points, the knot pocket)."""
+    known = Tendon.__dataclass_fields__
+    return Tendon(**{k: v for k, v in tendon.items() if k in known}).corners()
 
 
 def centreline(tendon: dict, bend_radius: float) -> np.ndarray:
-    """A tendon's path (mm): the exit at the base's top, straight down past the root face to
-    the lead, the routing points, the knot pocket; its corners rounded by ``bend_radius``."""
-    down = [tendon["lead"]] if tendon.get("lead") else [tendon["entry"]] if tendon.get(
-        "entry") else []
-    pts = [tendon["exit"], *down, *tendon["points"], *([tendon["tip"]] if tendon.get("tip")
-                                                       else [])]
-    return fillet(np.asarray(pts, float), bend_radius).sample(0.5)
+    """A tendon's path (mm), its corners rounded by ``bend_radius`` as the channel's are,
+    sampled every 0.5 mm."""
+    return fillet(corners(tendon), bend_radius).sample(0.5)
 
 
-def tube(path: np.ndarray, radius: float, sides: int = 12) -> tuple[np.ndarray, np.ndarray]:
-    """A closed tube of ``radius`` along ``path`` (rings carried along by parallel transport,
-    both ends capped): vertices and outward-facing triangles."""
-    p = np.asarray(path, float)
-    t = np.gradient(p, axis=0)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    n = np.cross(t[0], [1.0, 0.0, 0.0] if abs(t[0][0]) < 0.9 else [0.0, 1.0, 0.0])
-    a = np.linspace(0.0, 2 * np.pi, sides, endpoint=False)
-    rings = []
-    for ti in t:
-        n = n - (n @ ti) * ti
-        n /= np.linalg.norm(n)
-        b = np.cross(ti, n)
-        rings.append(radius * (np.cos(a)[:, None] * n + np.sin(a)[:, None] * b))
-    verts = np.concatenate([(p[:, None] + np.asarray(rings)).reshape(-1, 3), p[[0, -1]]])
-    k, j = np.arange(len(p) - 1)[:, None] * sides, np.arange(sides)[None]
-    a0, a1, b0, b1 = k + j, k + (j + 1) % sides, k + sides + j, k + sides + (j + 1) % sides
-    side = np.concatenate([np.stack([a0, b1, b0], -1), np.stack([a0, a1, b1], -1)], 1)
-    first, last = len(verts) - 2, len(verts) - 1
-    end = (len(p) - 1) * sides
-    caps = [[first, (i + 1) % sides, i] for i in range(sides)]
-    caps += [[last, end + i, end + (i + 1) % sides] for i in range(sides)]
-    return verts, np.concatenate([side.reshape(-1, 3), np.asarray(caps)]).astype(np.int64)
-
-
-def cylinder(x: float, z: float, radius: float, y_low: float, y_high: float):
-    """A vertical cylinder (manifold3d) at (x, z) from ``y_low`` up to ``y_high``."""
-    c = _m3().Manifold.cylinder(y_high - y_low, radius, radius, 24)
-    return c.rotate([-90.0, 0.0, 0.0]).translate([x, y_low, z])  # its axis z becomes y
+def channel(tendon: dict, bend_radius: float, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """The channel's solid around the tendon's path, built as the export cuts it
+    (:func:`dbtool.export.gripper.channels.tube`), as vertices and triangles."""
+    return mesh_arrays(tube(fillet(corners(tendon), bend_radius).as_polyline(), radius))
 
 
 def root_and_top(base, mounting: dict) -> tuple[float, float]:
@@ -139,7 +113,7 @@ def _own_cap(v: np.ndarray, f: np.ndarray, plane) -> tuple[np.ndarray, np.ndarra
 
 class _Shown:
     """One solid in the scene, cut with the others: its manifold (None: drawn uncut), its
-    colour and opacity, whether its checkbox shows it, and its current mesh handle."""
+    colour and opacity, whether its checkbox shows it, and its current handle."""
 
     def __init__(self, server, name: str, vertices, faces, colour, opacity=None) -> None:
         self.server, self.name, self.colour, self.opacity = server, name, colour, opacity
@@ -149,18 +123,25 @@ class _Shown:
         self.draw(None)
 
     def draw(self, plane) -> None:
-        """Draw the solid cut by ``plane`` (normal, offset: keeps normal . p >= offset)."""
-        v, f = self.whole
-        if plane is not None and self.solid is not None:
-            mesh = self.solid.trim_by_plane(*plane).to_mesh()
-            v, f = _own_cap(np.asarray(mesh.vert_properties)[:, :3],
-                            np.asarray(mesh.tri_verts), plane)
-        self.empty = len(f) == 0
+        """Draw what is left on the kept side of ``plane`` (normal, offset: keeps
+        normal . p >= offset; None: all of it); hide it when nothing is."""
+        geometry = self.cut(plane)
+        self.empty = geometry is None
         if self.empty:
             if self.handle is not None:
                 self.handle.visible = False
-            return
-        self.handle = self.server.scene.add_mesh_simple(
+        else:
+            self.handle = self.add(geometry)
+
+    def cut(self, plane):
+        v, f = self.whole
+        if plane is not None and self.solid is not None:
+            v, f = _own_cap(*mesh_arrays(self.solid.trim_by_plane(*plane)), plane)
+        return (v, f) if len(f) else None
+
+    def add(self, geometry):
+        v, f = geometry
+        return self.server.scene.add_mesh_simple(
             self.name, v.astype(np.float32), f.astype(np.uint32), color=self.colour,
             opacity=self.opacity, side="front", visible=self.on)
 
@@ -179,7 +160,7 @@ class _Path(_Shown):
         self.solid, self.on, self.empty, self.handle = None, True, False, None
         self.draw(None)
 
-    def draw(self, plane) -> None:
+    def cut(self, plane):
         seg = self.segments
         if plane is not None:  # the segments on the kept side, those across it cut short
             d = seg @ np.asarray(plane[0], np.float32) - np.float32(plane[1])  # (n, 2)
@@ -189,13 +170,11 @@ class _Path(_Shown):
                 out = d[:, end] < 0
                 f = (d[out, 1 - end] / (d[out, 1 - end] - d[out, end]))[:, None]
                 seg[out, end] = seg[out, 1 - end] + f * (seg[out, end] - seg[out, 1 - end])
-        self.empty = len(seg) == 0
-        if self.empty:
-            if self.handle is not None:
-                self.handle.visible = False
-            return
-        self.handle = self.server.scene.add_line_segments(
-            self.name, seg, self.colour, thickness=4.0, thickness_units="screen",
+        return seg if len(seg) else None
+
+    def add(self, geometry):
+        return self.server.scene.add_line_segments(
+            self.name, geometry, self.colour, thickness=4.0, thickness_units="screen",
             visible=self.on)
 
 
@@ -334,27 +313,28 @@ def serve_export(folder: Path, host: str = "127.0.0.1", port: int = 8080) -> Exp
         shown[s.name] = s
 
     radius = 0.5 * tj.get("channel_diameter_mm", 0.0) * CHANNEL_SHOWN
+    bend = tj.get("bend_radius_mm", 0.0)
     for t in tendons:
-        path = centreline(t, tj.get("bend_radius_mm", 0.0))
         colour = tuple(int(c) for c in rgb([ROLE_COLOURS.get(t.get("role"), "#000000")])[0])
-        shown[f"/tendons/{t['name']}"] = _Path(server, f"/tendons/{t['name']}", path, colour)
+        shown[f"/tendons/{t['name']}"] = _Path(server, f"/tendons/{t['name']}",
+                                               centreline(t, bend), colour)
         if radius > 0:
             shown[f"/channels/{t['name']}"] = _Shown(server, f"/channels/{t['name']}",
-                                                     *tube(path, radius), colour, 0.35)
+                                                     *channel(t, bend, radius), colour, 0.35)
     if mounting and "base" in meshes:
         root, top = root_and_top(meshes["base"], mounting)
         r = 0.5 * mounting.get("diameter_mm", 3.4)
         for k, (x, z) in enumerate(mounting.get("holes", [])):
-            m = cylinder(x, z, 0.9 * r, root - 0.5, top + 0.5).to_mesh()
+            m = vertical_cylinder(x, z, 0.9 * r, root - 0.5, top + 0.5, 24)
             shown[f"/mounting/hole{k}"] = _Shown(server, f"/mounting/hole{k}",
-                                                 m.vert_properties, m.tri_verts, HOLE_COLOUR)
+                                                 *mesh_arrays(m), HOLE_COLOUR)
         r, length = 0.5 * mounting.get("pin_diameter_mm", 3.0) + 0.05, mounting.get(
             "pin_length_mm", 3.0)
         pins = mounting.get("pins", []) + mounting.get("pins_mirror", [])
         for k, (x, z) in enumerate(pins):
-            m = cylinder(x, z, r, root - length - 0.05, root + 0.05).to_mesh()
+            m = vertical_cylinder(x, z, r, root - length - 0.05, root + 0.05, 24)
             shown[f"/mounting/pin{k}"] = _Shown(server, f"/mounting/pin{k}",
-                                                m.vert_properties, m.tri_verts, PIN_COLOUR)
+                                                *mesh_arrays(m), PIN_COLOUR)
 
     with server.gui.add_folder("show"):
         groups = {g: server.gui.add_checkbox(g, initial_value=True)

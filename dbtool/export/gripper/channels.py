@@ -229,7 +229,7 @@ def route_finger(finger, regions: dict, cfg: ExportConfig, finger_name: str, top
     return current
 
 
-def _tube(path: np.ndarray, radius: float, segments: int = 16):
+def tube(path: np.ndarray, radius: float, segments: int = 16):
     """A tube of ``radius`` along a polyline: hulls of consecutive balls, each capsule's balls
     turned differently so that no two share vertices (an STL reader would weld them)."""
     pieces = []
@@ -252,7 +252,7 @@ def centreline(t: Tendon, cfg: ExportConfig) -> np.ndarray:
 
 def finger_cut(t: Tendon, cfg: ExportConfig, root_mm: float):
     """What is cut from the finger for ``t``: the line's channel and the knot pocket."""
-    line = _tube(centreline(t, cfg), cfg.channel_radius)
+    line = tube(centreline(t, cfg), cfg.channel_radius)
     # the pocket is a counterbore square to the surface, so its rim is a clean edge (a pocket
     # along an oblique line would leave a feather edge where it breaks out)
     tip = np.array(t.tip)
@@ -267,7 +267,7 @@ def finger_cut(t: Tendon, cfg: ExportConfig, root_mm: float):
 def base_cut(t: Tendon, cfg: ExportConfig, top_mm: float, root_mm: float):
     """What is cut from the base for ``t``: the tube's seat from the top down to 1.5 mm above
     the root face (a shoulder the tube stops on) and the line's channel through the rest."""
-    line = _tube(centreline(t, cfg), cfg.channel_radius)
+    line = tube(centreline(t, cfg), cfg.channel_radius)
     r = cfg.seat_radius
     depth = top_mm - root_mm - 1.5
     seat = m3.Manifold.cylinder(depth + 1.0, r, r, 32).rotate([-90.0, 0.0, 0.0])

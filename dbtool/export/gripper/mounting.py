@@ -182,7 +182,7 @@ def _clear(d: float) -> float | None:
     return None if not np.isfinite(d) else round(float(d), 3)
 
 
-def _vertical_cylinder(x: float, z: float, radius: float, y_low: float, y_high: float,
+def vertical_cylinder(x: float, z: float, radius: float, y_low: float, y_high: float,
                        segments: int, radius_low: float | None = None):
     """A cylinder (or frustum: ``radius_low`` at its bottom) along y from y_low to y_high."""
     low = radius if radius_low is None else radius_low
@@ -199,7 +199,7 @@ def hole_clearance(fingers: list, holes: list, radius: float, root_mm: float,
     the true circle too (docs/export.md)."""
     body = m3.Manifold.batch_boolean(list(fingers), m3.OpType.Add)
     r = radius / math.cos(math.pi / segments)
-    return [float((_vertical_cylinder(x, z, r, root_mm - depth, root_mm, segments)
+    return [float((vertical_cylinder(x, z, r, root_mm - depth, root_mm, segments)
                    ^ body).volume()) for x, z in holes]
 
 
@@ -284,12 +284,12 @@ def pin_solids(pins: list, root_mm: float, pin: float = 3.0, length: float = 3.0
     bottom = root_mm - length
     solids, pockets = [], []
     for x, z in pins:
-        body = _vertical_cylinder(x, z, r, bottom + tip, root_mm + 0.5, segments)
+        body = vertical_cylinder(x, z, r, bottom + tip, root_mm + 0.5, segments)
         if tip:
             body = m3.Manifold.batch_hull(
-                [body, _vertical_cylinder(x, z, r, bottom, bottom + tip, segments, r - tip)])
+                [body, vertical_cylinder(x, z, r, bottom, bottom + tip, segments, r - tip)])
         solids.append(body)
-        pockets.append(_vertical_cylinder(x, z, r + clearance, bottom - depth_extra,
+        pockets.append(vertical_cylinder(x, z, r + clearance, bottom - depth_extra,
                                           root_mm + 0.01, segments))
     return (m3.Manifold.batch_boolean(solids, m3.OpType.Add),
             m3.Manifold.batch_boolean(pockets, m3.OpType.Add))

@@ -193,11 +193,11 @@ def _infill(finger, own: list, pins: list, cfg: ExportConfig, root: float) -> tu
     if cfg.infill != "voronoi":
         return finger, {}
     from dbtool.export.geometry.infill import InfillConfig, voronoi_infill
-    from dbtool.export.gripper.channels import _tube, centreline
+    from dbtool.export.gripper.channels import centreline, tube
 
     foam, info = voronoi_infill(finger, InfillConfig(shell=cfg.shell))
     # solid sleeves keep each channel and pin pocket a closed hole through the foam
-    sleeves = [_tube(centreline(t, cfg), cfg.channel_radius + cfg.min_wall) for t in own
+    sleeves = [tube(centreline(t, cfg), cfg.channel_radius + cfg.min_wall) for t in own
                if cfg.channels]
     if pins:
         sleeves += [pin_solids(pins, root, cfg.pin_diameter + 2 * cfg.min_wall,
