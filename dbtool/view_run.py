@@ -40,6 +40,6 @@ def view_run(path: str | Path, host: str = "127.0.0.1", port: int = 8080):
     if kind == "run":
         from dbtool.view.design_run import run_extras
 
-        extras = run_extras(path)
+        extras = run_extras(path, task)
     return serve(ro.episode, ro.positions, ro.metric, f"{task.title}: {file.parent.name}",
                  host, port, extras=extras)

@@ -24,7 +24,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from dbtool.atomic import atomic_write_text, check_writable
-from dbtool.compare.cells import read_cell
+from dbtool.compare.cells import CellSpec, read_cell
 from dbtool.errors import InputError, MissingFileError
 
 MAX_POINTS = 1500  # particles drawn per cell in the page's 3D figure
@@ -45,7 +45,7 @@ class Cell:
 
     @property
     def name(self) -> str:
-        return f"{self.method}-{self.task}-s{self.seed}"
+        return CellSpec(self.method, self.task, self.seed, "", "").name
 
     @property
     def label(self) -> str:
@@ -120,7 +120,7 @@ def read_comparison(folder: str | Path) -> Comparison:
     cells = []
     for key in dict.fromkeys([*asked, *by_cell]):
         m, t, s = key
-        cell_dir = folder / "cells" / f"{m}-{t}-s{s}"
+        cell_dir = CellSpec(m, t, s, "", str(folder)).folder
         row = by_cell.get(key) or read_cell(cell_dir) or {}
         status = str(row.get("status") or "not run")
         metric = row.get("metric")

@@ -32,6 +32,7 @@ from dbtool.viz.viewer import (
     add_task_scene,
     aim_camera,
     colours,
+    move_cameras,
     open_server,
     start_player,
     url_of,
@@ -160,9 +161,7 @@ def serve_comparison(folder: str | Path, host: str = "127.0.0.1", port: int = 80
         if points is None:
             points = np.array([[0.0, scene.ground_y, 0.0], scene.size], float)
         aim_camera(server, points)
-        for client in server.get_clients().values():
-            client.camera.look_at = server.initial_camera.look_at
-            client.camera.position = server.initial_camera.position
+        move_cameras(server, server.initial_camera.position, server.initial_camera.look_at)
 
     def clear_robot() -> None:
         if view.points is not None:

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from dbtool.viz.render import shown_particles
-from dbtool.viz.viewer import COLOUR_MODES, add_task_scene, colours
+from dbtool.viz.viewer import COLOUR_MODES, add_task_scene, colours, move_cameras
 
 VIEWS = ("rollout", "buffer's best designs", "co-design trajectory")
 XT_COLOUR = (150, 150, 150)
@@ -65,12 +65,9 @@ ROW = 4  # designs per row of the buffer's grid
 XT_SLOT = -1  # x_t is drawn one slot to the left of the solid scored at its stop
 
 
-def run_extras(folder: Path):
-    """The extras of the run in ``folder`` for :func:`dbtool.viz.viewer.serve`, or None when
-    it has neither ``best.npz`` nor ``trajectory.npz``."""
-    from dbtool.design import Design
-    from dbtool.sim.tasks import get_task
-
+def run_extras(folder: Path, task):
+    """The extras of the run of ``task`` in ``folder`` for :func:`dbtool.viz.viewer.serve`,
+    or None when it has neither ``best.npz`` nor ``trajectory.npz``."""
     folder = Path(folder)
     buffer, traj = None, None
     if (folder / "best.npz").is_file():
@@ -81,7 +78,6 @@ def run_extras(folder: Path):
             traj = {k: t[k] for k in t.files}
     if buffer is None and traj is None:
         return None
-    task = get_task(Design.load(folder / "design.npz").task)
     if traj is not None:  # the design the chain scored: the x0-estimate's, or x_t's own
         config = folder / "config.json"
         config = json.loads(config.read_text()) if config.is_file() else {}
@@ -127,7 +123,7 @@ def add_run_views(server, view, task, buffer: dict | None, traj: dict | None) ->
             for h in handles:
                 h.visible = v == chosen
         if chosen == VIEWS[0]:
-            _aim_at(server, server.initial_camera.position, server.initial_camera.look_at)
+            move_cameras(server, server.initial_camera.position, server.initial_camera.look_at)
         else:
             n = len(buffer["clouds"]) if chosen == VIEWS[1] else 0
             _frame(server, scene, [_slot(k, scene) for k in range(n)] if n
@@ -179,13 +175,7 @@ def _frame(server, scene, slots: list[np.ndarray]) -> None:
     lo, hi = np.min(slots, axis=0), np.max(slots, axis=0) + size
     centre = (lo + hi) / 2 * [1, 0.7, 1]
     reach = float(max(hi[0] - lo[0], hi[2] - lo[2], size[1]))
-    _aim_at(server, centre + reach * np.array([0.05, 0.95, 0.85]), centre)
-
-
-def _aim_at(server, position, look_at) -> None:
-    for client in server.get_clients().values():  # position first: it drags look_at along
-        client.camera.position = tuple(position)
-        client.camera.look_at = tuple(look_at)
+    move_cameras(server, centre + reach * np.array([0.05, 0.95, 0.85]), centre)
 
 
 def _add_trajectory(server, view, scene, traj: dict, robot) -> list:

@@ -133,6 +133,14 @@ def aim_camera(server, points: np.ndarray, direction=(1.1, 0.7, -1.4)) -> None:
     server.initial_camera.up = (0.0, 1.0, 0.0)
 
 
+def move_cameras(server, position, look_at) -> None:
+    """Put every connected client's camera at ``position``, looking at ``look_at`` (the
+    position first: setting it drags the look-at point along)."""
+    for client in server.get_clients().values():
+        client.camera.position = tuple(position)
+        client.camera.look_at = tuple(look_at)
+
+
 def start_player(slider, n: int, halt: threading.Event, playing, period: float = 0.08
                  ) -> None:
     """Advance ``slider`` (values ``0 .. n - 1``, cyclically) every ``period`` seconds while
