@@ -1,5 +1,6 @@
 """The corpus versions the prior trains on: 1 (:mod:`~dbtool.prior.corpora.shapes`, the shipped
-weights of version 1) and 2 (:mod:`~dbtool.prior.corpora.corpus`, the attribute corpus)."""
+weights of version 1), 2 (:mod:`~dbtool.prior.corpora.corpus`, the attribute corpus) and 3
+(:mod:`~dbtool.prior.corpora.corpus3`, the attribute corpus with its evaluation's fixes)."""
 
 from __future__ import annotations
 
@@ -7,14 +8,14 @@ import hashlib
 
 from dbtool.prior.corpora import shapes
 
-CORPORA = (1, 2)
+CORPORA = (1, 2, 3)
 
 
 def corpus_module(version: int):
     """The module that builds corpus ``version`` (``FAMILIES``, ``make_corpus``)."""
-    from dbtool.prior.corpora import corpus
+    from dbtool.prior.corpora import corpus, corpus3
 
-    return {1: shapes, 2: corpus}[version]
+    return {1: shapes, 2: corpus, 3: corpus3}[version]
 
 
 def corpus_digest(mod) -> str:

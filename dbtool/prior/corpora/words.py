@@ -52,6 +52,30 @@ HELDOUT_TEMPLATES = ("something resembling {np}", "an elastic {bare}",
 SPLIT_OF = {"train": "train", "reference": "train", "test": "train", "heldout": "heldout"}
 
 
+@dataclass(frozen=True)
+class Phrasing:
+    """The training phrasings of a corpus version: templates, adjectives and the probability
+    that a caption says an optional part count. Corpus 2 says every count; corpus 3 drops
+    the count of families whose noun alone names them ("a spring") half of the time, and adds
+    templates and adjectives near the held-out ones (the held-out words stay held out)."""
+
+    templates: tuple[str, ...] = TEMPLATES
+    adjectives: dict = field(default_factory=lambda: ADJECTIVES)
+    p_count: float = 1.0
+
+
+V2 = Phrasing()
+V3 = Phrasing(
+    templates=TEMPLATES + ("a flexible {bare}", "a rubber {bare}", "something like {np}",
+                           "a soft robot that looks like {np}", "an object shaped like {np}"),
+    adjectives={**ADJECTIVES,
+                "length": (("short", "stubby", "compact"), ("long", "elongated")),
+                "height": (("flat", "low", "shallow"), ("tall", "high", "lofty")),
+                "thickness": (("thin", "slender", "lean"), ("thick", "chunky", "stout", "bulky")),
+                "width": (("narrow",), ("wide", "broad", "spread-out"))},
+    p_count=0.5)
+
+
 @dataclass
 class Description:
     """What a drawn shape is: family nouns (the first is canonical), graded attributes
@@ -61,6 +85,7 @@ class Description:
     grades: dict[str, float] = field(default_factory=dict)
     counts: dict[str, int] = field(default_factory=dict)
     heldout_nouns: tuple[str, ...] = ()
+    count_optional: bool = False  # the noun alone names the family (corpus 3 may omit it)
 
     def words(self) -> dict[str, str]:
         """Attribute -> "low" or "high" for the grades outside the middle third."""
@@ -105,10 +130,10 @@ def noun_phrase(noun: str, adjectives: list[str], count: str | None) -> tuple[st
 
 
 def caption(desc: Description, rng: np.random.Generator, split: str = "train",
-            p_mention: float = 0.75) -> str:
+            p_mention: float = 0.75, phrasing: Phrasing = V2) -> str:
     """One caption of ``desc``: a random noun, each worded attribute mentioned with
-    probability ``p_mention`` (a random synonym), the counts, in a random template of the
-    split's phrasings."""
+    probability ``p_mention`` (a random synonym), the counts (an optional one with
+    ``phrasing.p_count``), in a random template of the split's phrasings."""
     held = SPLIT_OF[split] == "heldout"
     nouns = desc.nouns + (desc.heldout_nouns if held else ())
     noun = nouns[rng.integers(len(nouns))]
@@ -119,11 +144,14 @@ def caption(desc: Description, rng: np.random.Generator, split: str = "train",
         chosen.remove(pair[int(rng.integers(2))])
     adjs = []
     for a in chosen:
-        table = HELDOUT_ADJECTIVES if held and rng.uniform() < 0.5 else ADJECTIVES
+        table = HELDOUT_ADJECTIVES if held and rng.uniform() < 0.5 else phrasing.adjectives
         opts = table[a][0 if words[a] == "low" else 1] or ADJECTIVES[a][1]
         adjs.append(opts[rng.integers(len(opts))])
     count = None
-    if desc.counts:
+    said = bool(desc.counts)
+    if said and desc.count_optional and phrasing.p_count < 1:
+        said = bool(rng.uniform() < phrasing.p_count)
+    if said:
         part, n = next(iter(desc.counts.items()))
         forms = HELDOUT_WITH if held and rng.uniform() < 0.5 else WITH
         form = forms[rng.integers(len(forms))]
@@ -131,14 +159,14 @@ def caption(desc: Description, rng: np.random.Generator, split: str = "train",
             form = forms[0]
         count = form.format(n=NUMBERS[n], part=part if n != 1 else SINGULAR[part])
     np_, bare = noun_phrase(noun, adjs, count)
-    templates = HELDOUT_TEMPLATES if held else TEMPLATES
+    templates = HELDOUT_TEMPLATES if held else phrasing.templates
     if count:  # "a block with two legs robot" is no phrase
         templates = tuple(t for t in templates if not t.endswith("} robot"))
     return templates[rng.integers(len(templates))].format(np=np_, bare=bare)
 
 
 def captions(desc: Description, rng: np.random.Generator, n: int,
-             split: str = "train") -> list[str]:
+             split: str = "train", phrasing: Phrasing = V2) -> list[str]:
     """``n`` distinct captions of ``desc`` (fewer when the phrasings run out), canonical
     first: the plain noun phrase with every worded attribute and the counts."""
     words = desc.words()
@@ -151,7 +179,7 @@ def captions(desc: Description, rng: np.random.Generator, n: int,
     for _ in range(8 * n):
         if len(out) >= n:
             break
-        c = caption(desc, rng, split)
+        c = caption(desc, rng, split, phrasing=phrasing)
         if c not in out:
             out.append(c)
     return out
