@@ -83,11 +83,11 @@ for prompt, ds in table.items():
 # family); the numbers are in the model card.
 
 # %%
-from dbtool.prior.training.evaluate import slerp
+from dbtool.prior.sampling.text import interpolate
 
 a, b = prior.embed(["a ball", "a star"])
 US = np.linspace(0, 1, 4 if QUICK else 6)
-path = [prior.sample(embedding=slerp(a, b, float(u)), n=1, steps=STEPS, seed=0).clouds[0]
+path = [prior.sample(embedding=interpolate(a, b, float(u)), n=1, steps=STEPS, seed=0).clouds[0]
         for u in US]
 cloud_grid(path, "fig11_interpolation.png", [f"u = {u:.2f}" for u in US], cols=len(US))
 Image("fig11_interpolation.png")

@@ -118,6 +118,36 @@ def test_inference_path_matches_the_training_path():
         assert torch.allclose(fast, ref.detach(), atol=1e-5)
 
 
+def test_per_token_conditioning_reads_the_tokens_and_ignores_the_padding():
+    """A model with ``tokens`` reads the text encoder's token states by attention: changing a
+    word's state changes the prediction, changing a padded slot does not; the training and
+    inference paths agree with the mask; the null condition (zeros) leaves only the null
+    token; the network stays permutation equivariant."""
+    m = tiny_model(tokens=8)
+    c = text.encode_tokens(["a spring", "a thick coil with three turns"], 8)
+    assert c.shape == (2, text.cond_dim(8)) == (2, 384 + 8 * 385)
+    vec, tok, mask = text.unpack_tokens(c, 8)
+    assert torch.equal(vec, text.encode(["a spring", "a thick coil with three turns"]))
+    assert mask.sum(1).tolist() == [4, 8]  # [CLS] a spring [SEP]; the long one truncated
+    x, t = torch.randn(2, 40, 3), torch.tensor([10, 700])
+    ref = m(x, t, c)
+    with torch.inference_mode():
+        assert torch.allclose(m(x, t, c), ref.detach(), atol=1e-5)
+        padded, word = c.clone(), c.clone()
+        padded[0, 384 + 6 * 384: 384 + 7 * 384] = torch.randn(384)  # slot 6 of "a spring"
+        word[0, 384 + 2 * 384: 384 + 3 * 384] = torch.randn(384)  # the word "spring"
+        assert torch.equal(m(x, t, padded)[0], m(x, t, c)[0])
+        assert not torch.allclose(m(x, t, word)[0], m(x, t, c)[0], atol=1e-4)
+        perm = torch.randperm(40)
+        assert torch.allclose(m(x, t, c)[:, perm], m(x[:, perm], t, c), atol=1e-5)
+        assert torch.isfinite(m(x, t, torch.zeros_like(c))).all()
+    prior = Prior(m, bf16=False)
+    assert prior.tokens == 8 and torch.equal(prior.embed(["a spring"]), c[:1])
+    with pytest.raises(ValueError, match="shape"):
+        prior.sample(embedding=torch.randn(1, 384), steps=2, points=8)
+    assert prior.sample("a spring", steps=2, points=8).clouds.shape == (1, 8, 3)
+
+
 def test_sampler_is_deterministic_under_a_seed():
     prior = Prior(tiny_model(), bf16=False)
     c = torch.randn(1, 384)
@@ -307,7 +337,7 @@ def test_training_on_the_attribute_corpus_caches_its_caption_embeddings(tmp_path
     assert emb.shape == (len(table), 384)
     assert torch.allclose(emb[:3], text.encode(table[:3]), atol=1e-5)
     with pytest.raises(ValueError, match="unknown corpus version"):
-        TrainConfig(corpus=3)
+        TrainConfig(corpus=4)
     changed = resumed_config(tmp_path / "run", 4)
     assert changed.corpus_digest == cfg.corpus_digest != ""
     changed.corpus_digest = "0123456789"
@@ -347,3 +377,25 @@ def test_compiled_training_trains_the_same_model(tmp_path):
     assert compiled["config"]["compile"] is True
     for k, v in eager["model"].items():
         torch.testing.assert_close(compiled["model"][k], v, rtol=1e-4, atol=1e-5)
+
+
+def test_training_with_per_token_conditions_on_corpus_three(tmp_path):
+    """Corpus 3 trains like corpus 2; a per-token model caches packed conditions (float16)
+    and some of its steps see the sentence alone (``token_drop``)."""
+    from dbtool.prior.corpora import corpus3
+    from dbtool.prior.training.train import caption_embeddings, load_corpus, make_batch
+
+    cfg = TrainConfig(kind="base", steps=2, batch=64, subset=16, per_family=1, ckpt_every=2,
+                      log_every=1, warmup=1, corpus=3, token_drop=0.25,
+                      model=ModelConfig(**TINY, tokens=4))
+    cache = tmp_path / "corpus"
+    train(cfg, tmp_path / "run", cache_dir=cache, show_progress=False)
+    clouds, _labels, table, cap_index, cap_count = load_corpus(cfg, cache)
+    assert len(clouds) == len(corpus3.FAMILIES) and sorted(cache.glob("corpus-v3-*.npz"))
+    emb = caption_embeddings(cfg, table, cache)
+    assert emb.dtype == torch.float16 and emb.shape == (len(table), text.cond_dim(4))
+    want = text.encode_tokens(table[:2], 4)
+    assert torch.allclose(emb[:2].float(), want, atol=2e-3 * want.abs().max().item())
+    _, cond, _ = make_batch(cfg, clouds, cap_index, cap_count, emb, np.random.default_rng(0))
+    alone = (cond[:, 384:] == 0).all(1)
+    assert 0 < int(alone.sum()) < 64 and (cond[:, :384] != 0).any(1).all()

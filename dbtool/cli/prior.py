@@ -20,8 +20,8 @@ def prior_train(
     resume: bool = typer.Option(False, "--resume", help="continue from OUT/checkpoint.pt"),
     threads: int = typer.Option(None, min=1, help="torch threads (default 1)"),
     seed: int = typer.Option(None, help="seed (default 0)"),
-    corpus: int = typer.Option(None, help="corpus version: 1 (the shipped weights, default) "
-                               "or 2 (the attribute corpus)"),
+    corpus: int = typer.Option(None, help="corpus version: 1 (the default), 2 (the attribute "
+                               "corpus) or 3 (the attribute corpus, revised)"),
     compile_: bool = typer.Option(False, "--compile", help="torch.compile the model (needs a C "
                                   "compiler; about 2 min to compile, then faster steps)"),
 ) -> None:

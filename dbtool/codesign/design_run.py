@@ -40,7 +40,6 @@ from dbtool.codesign.config import (
 from dbtool.codesign.embedding import EmbeddingOptimiser, score
 from dbtool.codesign.langevin import codesign_sample
 from dbtool.errors import InputError, RunError
-from dbtool.prior.sampling.text import null
 from dbtool.sim.tasks import N_STEPS, Task, get_task
 
 FORMAT = "dbtool.run/1"
@@ -159,7 +158,7 @@ class DesignRun:
 
             prior = Prior.load()
         self.prior = prior
-        start = prior.embed(settings.start) if settings.start else null()
+        start = prior.embed(settings.start) if settings.start else prior.null()
         self.opt = EmbeddingOptimiser(prior, self.task, self.emb_cfg, start, seed=settings.seed,
                                       n_steps=settings.n_steps)
         self.state = State()

@@ -82,13 +82,14 @@ def train_step(prior, c: torch.Tensor | Callable[[], torch.Tensor], opt: torch.o
     return float(loss.detach())
 
 
-@lru_cache(maxsize=2)
-def caption_atoms(corpus: int = 1) -> tuple[tuple[str, ...], torch.Tensor]:
+@lru_cache(maxsize=4)
+def caption_atoms(corpus: int = 1, tokens: int = 0) -> tuple[tuple[str, ...], torch.Tensor]:
     """One caption per family of corpus ``corpus`` ("a ball", "a star", ..., on the attribute
-    corpus "a block with four legs") and their embeddings: the conditions the prior was
-    trained on (its family prompts, docs/prior.md)."""
+    corpus "a block with four legs") and their conditions: the conditions the prior was
+    trained on (its family prompts, docs/prior.md); for a prior that reads ``tokens`` token
+    states, packed with them (:func:`dbtool.prior.sampling.text.encode_tokens`)."""
     from dbtool.prior.corpora.versions import corpus_module
-    from dbtool.prior.sampling.text import encode
+    from dbtool.prior.sampling.text import encode, encode_tokens
     from dbtool.prior.training.evaluate import prompt_of
 
     if corpus == 1:
@@ -97,7 +98,7 @@ def caption_atoms(corpus: int = 1) -> tuple[tuple[str, ...], torch.Tensor]:
         names = tuple(make_shape(f, 0, "train", 0, 64).caption for f in FAMILIES)
     else:
         names = tuple(prompt_of(f, corpus) for f in corpus_module(corpus).FAMILIES)
-    return names, encode(list(names))
+    return names, encode_tokens(list(names), tokens) if tokens else encode(list(names))
 
 
 class Embedding(torch.nn.Module):
@@ -116,7 +117,7 @@ class Embedding(torch.nn.Module):
     """
 
     def __init__(self, start: torch.Tensor, space: str = "mixture",
-                 start_weight: float = 0.9, corpus: int = 1) -> None:
+                 start_weight: float = 0.9, corpus: int = 1, tokens: int = 0) -> None:
         super().__init__()
         if space not in SPACES:
             raise InputError(f"unknown embedding space {space!r}; choose one of "
@@ -126,7 +127,7 @@ class Embedding(torch.nn.Module):
         if space == "free":
             self.c = torch.nn.Parameter(start.clone())
             return
-        _, caps = caption_atoms(corpus)
+        _, caps = caption_atoms(corpus, tokens)
         atoms = torch.cat([start, torch.zeros_like(start), caps])
         null = float(start.norm()) == 0
         if null:
@@ -197,7 +198,8 @@ class EmbeddingOptimiser:
         for p in self.prior.base.parameters():
             p.requires_grad_(False)
         self.embedding = Embedding(self.c, self.cfg.space,
-                                   corpus=getattr(self.prior, "corpus", 1))
+                                   corpus=getattr(self.prior, "corpus", 1),
+                                   tokens=getattr(self.prior, "tokens", 0))
         lr = self.cfg.free_lr if self.cfg.space == "free" else self.cfg.lr
         self.opt = torch.optim.Adam(self.embedding.parameters(), lr=lr)
         self.buffer = Buffer(self.cfg.buffer_size)

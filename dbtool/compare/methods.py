@@ -22,7 +22,6 @@ import numpy as np
 
 from dbtool.compare.budget import GRAD_COST, Budget, gradient_iterations
 from dbtool.errors import InputError, RunError
-from dbtool.prior.sampling.text import null
 from dbtool.sim.robot import Robot
 from dbtool.sim.tasks import Task
 
@@ -115,7 +114,7 @@ def _prior_samples(task: Task, budget: Budget, seed: int, log) -> Outcome:
     prior = load_prior()
     emb, _ = preset("quick", task.name)
     emb = replace(emb, sample_steps=budget.sample_steps)
-    opt = EmbeddingOptimiser(prior, task, emb, null(), seed=seed,
+    opt = EmbeddingOptimiser(prior, task, emb, prior.null(), seed=seed,
                              n_steps=budget.n_steps)
     n = max(1, budget.units - 1)
     clouds, _ = opt.sample(n, seed=seed * 100_003)
@@ -197,7 +196,7 @@ def _diffusebot(task: Task, budget: Budget, seed: int, log) -> Outcome:
 
     prior = load_prior()
     emb, cod, plan = diffusebot_configs(task.name, budget)
-    opt = EmbeddingOptimiser(prior, task, emb, null(), seed=seed,
+    opt = EmbeddingOptimiser(prior, task, emb, prior.null(), seed=seed,
                              n_steps=budget.n_steps)
     for _ in range(emb.epochs):
         row = opt.step()

@@ -42,6 +42,7 @@ class ModelConfig:
     cond_dim: int = 384
     n_freq: int = 6  # Fourier features of the coordinates
     coarse: bool = False  # upsampler: conditioned on a coarse cloud
+    tokens: int = 0  # per-token conditioning: read this many text-encoder token states
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -59,16 +60,22 @@ class Attention(nn.Module):
         self.kv = nn.Linear(width, 2 * width)
         self.out = nn.Linear(width, width)
 
-    def forward(self, x: torch.Tensor, ctx: torch.Tensor) -> torch.Tensor:
+    def forward(self, x: torch.Tensor, ctx: torch.Tensor,
+                weight: torch.Tensor | None = None) -> torch.Tensor:
+        """``weight`` (B, M) in [0, 1]: how much each context entry takes part (None: all
+        fully); attention logits get ``log(weight)``, so 0 removes an entry and a blend of two
+        conditions blends smoothly."""
         b, n, w = x.shape
         m, h = ctx.shape[1], self.heads
         q = self.q(x).view(b, n, h, w // h).transpose(1, 2)
         k, v = self.kv(ctx).view(b, m, 2, h, w // h).permute(2, 0, 3, 1, 4)
+        bias = None if weight is None else torch.log(weight.clamp(0.0, 1.0))[:, None, None, :]
         if torch.is_grad_enabled():
             att = (q @ k.transpose(-1, -2)) * (w // h) ** -0.5
-            y = att.softmax(-1) @ v
+            y = (att if bias is None else att + bias).softmax(-1) @ v
         else:
-            y = F.scaled_dot_product_attention(q, k, v)
+            y = F.scaled_dot_product_attention(
+                q, k, v, attn_mask=None if bias is None else bias.to(q.dtype))
         return self.out(y.transpose(1, 2).reshape(b, n, w))
 
 
@@ -82,9 +89,10 @@ class Block(nn.Module):
         self.mlp = nn.Sequential(nn.Linear(width, 4 * width), nn.GELU(),
                                  nn.Linear(4 * width, width))
 
-    def forward(self, x: torch.Tensor, ctx: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(self, x: torch.Tensor, ctx: torch.Tensor | None = None,
+                weight: torch.Tensor | None = None) -> torch.Tensor:
         hx = self.ln_x(x)
-        x = x + self.attn(hx, hx if ctx is None else self.ln_c(ctx))
+        x = x + self.attn(hx, hx if ctx is None else self.ln_c(ctx), weight)
         return x + self.mlp(self.ln_m(x))
 
 
@@ -114,6 +122,9 @@ class PointDiffusionTransformer(nn.Module):
         self.point_in = nn.Linear(feat, w)
         self.time_mlp = nn.Sequential(nn.Linear(w, w), nn.SiLU(), nn.Linear(w, w))
         self.cond_in = nn.Linear(c.cond_dim, w)
+        if c.tokens:  # token states join the latents' context; a null token is always there
+            self.token_in = nn.Sequential(nn.LayerNorm(c.cond_dim), nn.Linear(c.cond_dim, w))
+            self.token_null = nn.Parameter(torch.randn(1, 1, w) * 0.02)
         self.latents = nn.Parameter(torch.randn(c.latents, w) * 0.02)
         self.encoder = Block(w, c.heads)
         self.blocks = nn.ModuleList(Block(w, c.heads) for _ in range(c.depth))
@@ -139,7 +150,8 @@ class PointDiffusionTransformer(nn.Module):
         c = self.config
         b = x.shape[0]
         temb = self.time_mlp(timestep_embedding(t, c.width).to(x.dtype))
-        cemb = self.cond_in(cond.to(x.dtype))
+        vec = cond[:, :c.cond_dim] if c.tokens else cond
+        cemb = self.cond_in(vec.to(x.dtype))
         glob = (temb + cemb)[:, None]  # (B, 1, W)
         h = self.point_in(fourier(x, c.n_freq)) + glob
         extra = [temb[:, None], cemb[:, None]]
@@ -148,11 +160,30 @@ class PointDiffusionTransformer(nn.Module):
                 raise ValueError("the upsampler needs the coarse cloud")
             extra.append(self.coarse_in(fourier(coarse, c.n_freq)) + glob)
         z = self.latents.expand(b, -1, -1)
-        z = self.encoder(z, torch.cat([h, *extra], 1))
-        z = torch.cat([z, temb[:, None], cemb[:, None]], 1)
+        words, enc_weight, lat_weight = self._tokens(cond, b, h.shape[1] + len(extra)) \
+            if c.tokens else ([], None, None)
+        z = self.encoder(z, torch.cat([h, *extra, *words], 1), enc_weight)
+        z = torch.cat([z, temb[:, None], cemb[:, None], *words], 1)
         for blk in self.blocks:
-            z = blk(z)
+            z = blk(z, weight=lat_weight)
+        z = z[:, :c.latents + 2]  # the decoder reads the latents (and time, condition)
         ctx = z if self.coarse_in is None else torch.cat([z, extra[2]], 1)
         for blk in self.decoder:
             h = blk(h, ctx)
         return self.out(self.ln_out(h))
+
+    def _tokens(self, cond: torch.Tensor, b: int, n_before: int
+                ) -> tuple[list[torch.Tensor], torch.Tensor, torch.Tensor]:
+        """The token states of packed conditions (``text.encode_tokens``) as model tokens,
+        with a null token in front, and the context weights of the encoder (``n_before``
+        point and extra tokens first) and of the latent blocks."""
+        from dbtool.prior.sampling.text import unpack_tokens
+
+        c = self.config
+        _, tok, weight = unpack_tokens(cond, c.tokens)
+        words = torch.cat([self.token_null.expand(b, 1, -1).to(cond.dtype),
+                           self.token_in(tok)], 1)
+        ones = torch.ones(b, max(n_before, c.latents + 2) + 1, device=cond.device)
+        weight = torch.cat([ones[:, :1], weight.float()], 1)
+        return ([words], torch.cat([ones[:, :n_before], weight], 1),
+                torch.cat([ones[:, :c.latents + 2], weight], 1))

@@ -172,10 +172,27 @@ class Prior:
         return prior
 
     # ------------------------------------------------------------------ conditions
-    @staticmethod
-    def embed(prompts: Sequence[str] | str) -> torch.Tensor:
-        """Prompt embeddings (the conditioning space), shape ``(len, 384)``."""
-        return text.encode(list(prompts) if not isinstance(prompts, str) else [prompts])
+    @property
+    def tokens(self) -> int:
+        """How many text-encoder token states the base model reads (0: the sentence
+        embedding alone)."""
+        return int(getattr(getattr(self.base, "config", None), "tokens", 0))
+
+    @property
+    def cond_dim(self) -> int:
+        """Width of the base model's condition vectors (:func:`text.cond_dim`)."""
+        return text.cond_dim(self.tokens)
+
+    def null(self) -> torch.Tensor:
+        """The unconditional condition, ``(1, cond_dim)`` zeros (the condition dropped in
+        training, docs/method.md §1)."""
+        return torch.zeros(1, self.cond_dim)
+
+    def embed(self, prompts: Sequence[str] | str) -> torch.Tensor:
+        """Prompt conditions, shape ``(len, cond_dim)``: the sentence embeddings (384), with
+        the packed token states for a model that reads them (:func:`text.encode_tokens`)."""
+        plist = list(prompts) if not isinstance(prompts, str) else [prompts]
+        return text.encode_tokens(plist, self.tokens) if self.tokens else text.encode(plist)
 
     def eps(self, x: torch.Tensor, t: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
         """The base model's epsilon (bfloat16 autocast on ``x``'s device when ``bf16``, by
@@ -197,8 +214,8 @@ class Prior:
             if not np.isfinite(s) or abs(s) > MAX_GUIDANCE:
                 raise InputError(f"guidance scale {s} is outside [-{MAX_GUIDANCE}, "
                                  f"{MAX_GUIDANCE}]")
-            if c.dim() != 2 or c.shape[-1] != text.DIM:
-                raise ValueError(f"a condition must have shape (1 or n, {text.DIM})")
+            if c.dim() != 2 or c.shape[-1] != self.cond_dim:
+                raise ValueError(f"a condition must have shape (1 or n, {self.cond_dim})")
         gen = torch.Generator().manual_seed(seed)
         if x_T is None:
             x_T = torch.randn((n, points, 3), generator=gen)

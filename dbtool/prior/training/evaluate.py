@@ -21,6 +21,7 @@ import torch
 from dbtool.errors import InputError
 from dbtool.prior.corpora import shapes
 from dbtool.prior.corpora.versions import corpus_module
+from dbtool.prior.sampling import text
 from dbtool.prior.sampling.pipeline import Prior
 from dbtool.prior.sampling.schedulers import Scheduler, scheduler_for
 from dbtool.prior.training.metrics import (
@@ -283,14 +284,6 @@ def heldout_prompts(family: str, version: int = 2, n: int = 2) -> list[str]:
     return out
 
 
-def slerp(a: torch.Tensor, b: torch.Tensor, u: float) -> torch.Tensor:
-    """Spherical interpolation of unit embeddings."""
-    om = torch.arccos((a * b).sum().clamp(-1, 1))
-    if om < 1e-6:
-        return a
-    return (torch.sin((1 - u) * om) * a + torch.sin(u * om) * b) / torch.sin(om)
-
-
 def interpolation(prior: Prior, fam_a: str, fam_b: str, ref, ref_lab, steps: int,
                   guidance: float, seed: int, n: int = 7, samples: int = 8,
                   eta: float = 1.0, version: int = 1) -> dict:
@@ -302,7 +295,7 @@ def interpolation(prior: Prior, fam_a: str, fam_b: str, ref, ref_lab, steps: int
     sched = scheduler_for(eta, prior.scheduler.schedule)
     rows, path = [], []
     for u in np.linspace(0, 1, n):
-        e = slerp(ea, eb, float(u))
+        e = text.interpolate(ea, eb, float(u))
         g = subsample(prior.sample(embedding=e, n=samples, guidance=guidance, steps=steps,
                                    seed=seed, scheduler=sched).clouds, ref.shape[1], seed=2)
         nn = ref_lab[chamfer_matrix(g, ref).argmin(1).numpy()]

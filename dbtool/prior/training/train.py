@@ -52,8 +52,9 @@ class TrainConfig:
     warmup: int = 200
     weight_decay: float = 0.01
     ema: float = 0.999
+    token_drop: float = 0.2  # per-token models: share of steps conditioned on the sentence alone
     per_family: int = 300  # training shapes per family
-    corpus: int = 1  # 1: prior/corpora/shapes.py (the shipped weights), 2: prior/corpora/corpus.py
+    corpus: int = 1  # 1: corpora/shapes.py (version 1), 2: corpora/corpus.py, 3: corpora/corpus3.py
     corpus_digest: str = ""  # hash of the corpus the run started with (set by train)
     seed: int = 0
     threads: int = 1
@@ -75,12 +76,15 @@ class TrainConfig:
 
 
 def preset(kind: str, **overrides) -> TrainConfig:
-    """The configuration the shipped weights were trained with (``MODEL_CARD.md``); on the
-    attribute corpus (``corpus=2``) the base model trains for 24,000 steps."""
+    """The configuration the shipped weights were trained with (``MODEL_CARD.md``): on the
+    attribute corpus (``corpus=2``) the base model trains for 24,000 steps; on corpus 3 for
+    30,000 steps with per-token conditioning (24 token states, chosen from the measurements of
+    ``benchmarks/prior_scaling.py``, docs/prior.md)."""
     if kind == "base":
-        steps = 24000 if overrides.get("corpus") == 2 else 14000
+        corpus = overrides.get("corpus")
+        steps = {2: 24000, 3: 30000}.get(corpus, 14000)
         cfg = TrainConfig(kind="base", steps=steps, batch=32, subset=256, ckpt_every=500,
-                          model=ModelConfig(depth=6))
+                          model=ModelConfig(depth=6, tokens=24 if corpus == 3 else 0))
     elif kind == "upsampler":
         cfg = TrainConfig(kind="upsampler", steps=4000, batch=16, subset=256, ckpt_every=250)
     else:
@@ -140,22 +144,25 @@ def caption_embeddings(cfg: TrainConfig, table: list[str], cache_dir: Path,
     """The text embeddings of the corpus's caption table. Corpus 2 has tens of thousands of
     captions, so they are cached next to the corpus, chunk by chunk (an interrupted encoding
     resumes)."""
-    if cfg.corpus == 1:
+    tokens = cfg.model.tokens
+    if cfg.corpus == 1 and not tokens:
         return text.encode(table)
     from tqdm import tqdm
 
     digest = hashlib.sha256("\n".join(table).encode()).hexdigest()[:10]
-    base = cache_dir / f"captions-v{cfg.corpus}-{digest}"
+    base = cache_dir / (f"captions-v{cfg.corpus}-{digest}" + (f"-tok{tokens}" if tokens else ""))
     parts = []
     for k in tqdm(range(0, len(table), chunk), desc="caption embeddings", unit="chunk"):
         path = Path(f"{base}-{k // chunk:04d}.npy")
         if path.exists():
             parts.append(np.load(path))
             continue
-        vecs = text.encode(table[k: k + chunk]).numpy().astype(np.float32)
+        batch = table[k: k + chunk]
+        vecs = (text.encode_tokens(batch, tokens).numpy().astype(np.float16) if tokens else
+                text.encode(batch).numpy().astype(np.float32))
         atomic_write(path, lambda tmp, v=vecs: np.save(tmp, v))
         parts.append(vecs)
-    return torch.from_numpy(np.concatenate(parts))
+    return torch.from_numpy(np.concatenate(parts))  # float16 for packed token states
 
 
 def lr_at(cfg: TrainConfig, step: int) -> float:
@@ -175,7 +182,9 @@ def make_batch(cfg: TrainConfig, clouds, cap_index, cap_count, emb, rng: np.rand
         x0 = np.take_along_axis(pts, perm[:, : cfg.subset, None], 1)
         coarse = None
         which = (rng.random(cfg.batch) * cap_count[idx]).astype(int)
-        cond = emb[np.array([cap_index[i][w] for i, w in zip(idx, which, strict=True)])]
+        cond = emb[np.array([cap_index[i][w] for i, w in zip(idx, which, strict=True)])].float()
+        if cfg.model.tokens:  # some steps see the sentence alone (co-design's free embedding)
+            cond[rng.random(cfg.batch) < cfg.token_drop, text.DIM:] = 0.0
     else:
         coarse = torch.from_numpy(np.take_along_axis(pts, perm[:, :COARSE, None], 1) * SCALE)
         x0 = np.take_along_axis(pts, perm[:, COARSE: COARSE + cfg.subset, None], 1)
