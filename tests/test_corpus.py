@@ -198,7 +198,7 @@ def test_redrawn_worms_bulge_at_every_segment():
         r = np.ptp(p[:, 1]) / 2  # the bead radius, normalised
         beads = np.linspace(p[:, 0].min() + r, p[:, 0].max() - r, k)
 
-        def thickness(x: float) -> float:
+        def thickness(x: float, p=p) -> float:
             return float(np.ptp(p[np.abs(p[:, 0] - x) < 0.01, 1]))
 
         bead = np.mean([thickness(x) for x in beads])

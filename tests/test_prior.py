@@ -399,3 +399,21 @@ def test_training_with_per_token_conditions_on_corpus_three(tmp_path):
     _, cond, _ = make_batch(cfg, clouds, cap_index, cap_count, emb, np.random.default_rng(0))
     alone = (cond[:, 384:] == 0).all(1)
     assert 0 < int(alone.sum()) < 64 and (cond[:, :384] != 0).any(1).all()
+
+
+def test_shared_measure_scores_versions_against_the_same_references():
+    from dbtool.prior.training.shared import shared_measure, shared_references
+
+    ref, lab = shared_references(["ball", "star"], [1, 3], per_family=2, points=64)
+    assert ref.shape == (8, 64, 3) and sorted(lab.tolist()) == [0, 0, 0, 0, 1, 1, 1, 1]
+    old, new = Prior(tiny_model(), bf16=False), Prior(tiny_model(1, tokens=4), bf16=False)
+    old.corpus, new.corpus = 1, 3
+    seen = []
+    res = shared_measure({"v1": old, "v3": new}, ["ball", "star"], samples=2, steps=2,
+                         per_family=2, parts=lambda name, f: seen.append(name) or f())
+    assert res["corpora"] == [1, 3] and set(res["priors"]) == {"v1", "v3"}
+    assert seen == ["shared/v1/ball", "shared/v1/star", "shared/v3/ball", "shared/v3/star"]
+    for r in res["priors"].values():
+        assert r["per_family"]["ball"]["prompt"] == "a ball"
+        assert r["accuracy"] == pytest.approx(np.mean([f["accuracy"]
+                                                       for f in r["per_family"].values()]))

@@ -90,30 +90,24 @@ def design(
     arch: str = typer.Option("cpu", help="cpu | cuda | auto"),
     report: bool = typer.Option(True, "--report/--no-report",
                                 help="write report.html (docs/viewing.md)"),
+    prior: int = typer.Option(None, "--prior", min=1, help="shipped prior version (default: "
+                              "the default, docs/prior.md)"),
 ) -> None:
     """Breed a robot for TASK (DiffuseBot: embedding optimisation, then diffusion as
     co-design) and save design.npz, metrics and figures in a resumable run directory."""
-    from dbtool.baselines.run import ParticleRunConfig, check_method, particle_run
+    from dbtool.baselines.run import check_method
+    from dbtool.cli.common import particle_design
     from dbtool.codesign.design_run import Settings
     from dbtool.codesign.launch import open_design_run
     from dbtool.sim.tasks import get_task
 
     with guarded():
         if check_method(method) == "particle":
-            cfg = ParticleRunConfig(task, iterations, steps, seed, arch)
-            with ProgressBar(iterations, f"design {cfg.task}", "iter") as bar:
-                res = particle_run(cfg, run_dir, on_iteration=lambda k, m: (
-                    bar.set_postfix(metric=f"{m:.5f}"), bar.update(1)))
-            typer.echo(f"{res.task}: final metric = {res.metric:.6f}")
-            typer.echo(f"design:  {res.design}")
-            if report:
-                from dbtool.report_run import report_run
-
-                typer.echo(f"report:  {report_run(res.design)}")
-            return
+            return particle_design(task, iterations, steps, seed, arch, run_dir, report)
         run = open_design_run(Settings(get_task(task).name, preset, seed, epochs, start, prompt,
                                        prompt_guidance, samples, kappa, None, steps,
-                                       prompt_t_min=prompt_t_min), run_dir, resume, arch)
+                                       prompt_t_min=prompt_t_min, prior=prior), run_dir, resume,
+                              arch)
         if resume is not None:
             typer.echo(f"resuming {resume} at epoch {run.state.epoch}, "
                        f"{len(run.state.samples)} co-designed samples done")

@@ -1,10 +1,12 @@
-"""What every ``dbtool`` command shares: one-line errors and progress bars on stderr."""
+"""What every ``dbtool`` command shares: one-line errors and progress bars on stderr (and the
+particle baseline's design run, which ``dbtool design`` hands over to)."""
 
 from __future__ import annotations
 
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
 import typer
 
@@ -59,3 +61,20 @@ class ProgressBar:
     def __exit__(self, *exc: object) -> None:
         if self.bar is not None:
             self.bar.close()
+
+
+def particle_design(task: str, iterations: int, steps: int, seed: int, arch: str,
+                    run_dir: Path | None, report: bool) -> None:
+    """``dbtool design --method particle``: the particle baseline's run, printed."""
+    from dbtool.baselines.run import ParticleRunConfig, particle_run
+
+    cfg = ParticleRunConfig(task, iterations, steps, seed, arch)
+    with ProgressBar(iterations, f"design {cfg.task}", "iter") as bar:
+        res = particle_run(cfg, run_dir, on_iteration=lambda k, m: (
+            bar.set_postfix(metric=f"{m:.5f}"), bar.update(1)))
+    typer.echo(f"{res.task}: final metric = {res.metric:.6f}")
+    typer.echo(f"design:  {res.design}")
+    if report:
+        from dbtool.report_run import report_run
+
+        typer.echo(f"report:  {report_run(res.design)}")

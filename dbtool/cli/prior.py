@@ -65,38 +65,40 @@ def prior_evaluate(
     families: list[str] = typer.Option(None, "--family", help="only these families"),
     out: Path = typer.Option(Path("runs/prior/eval.json"), help="metrics JSON"),
     corpus: int = typer.Option(1, help="the corpus whose families and references are used: "
-                               "1 or 2 (the attribute corpus)"),
-    attribute_pairs: int = typer.Option(4, min=1, help="corpus 2: noise draws per low/high "
+                               "1, 2 (the attribute corpus) or 3 (revised)"),
+    attribute_pairs: int = typer.Option(4, min=1, help="corpus 2, 3: noise draws per low/high "
                                         "attribute prompt pair and per legs prompt"),
 ) -> None:
     """Prompt fidelity (1-NN Chamfer), its ceiling, paraphrases, diversity, interpolation;
-    on corpus 2 also held-out phrasings, attribute control and part counts. Finished pieces
+    on corpora 2 and 3 also held-out phrasings, attribute control and part counts. Finished pieces
     are kept in OUT's ``.parts.json``: an interrupted evaluation resumes there."""
+    from dbtool.prior.corpora.versions import CORPORA
     from dbtool.prior.sampling.pipeline import Prior
     from dbtool.prior.training.evaluate import Parts, evaluate, weights_digest
     from dbtool.runs import write_json
 
     with guarded():
         prior = Prior.load(base, with_upsampler=False)
-        if corpus not in (1, 2):
-            raise InputError(f"unknown corpus version {corpus}: 1 or 2")
+        if corpus not in CORPORA:
+            raise InputError(f"unknown corpus version {corpus}: "
+                             f"{', '.join(map(str, CORPORA))}")
         parts = Parts(out.with_name(out.stem + ".parts.json"), {
             "weights": weights_digest(prior.base), "samples": samples, "steps": steps,
             "guidance": guidance, "families": families or None, "corpus": corpus,
-            "attribute_pairs": attribute_pairs if corpus == 2 else None})
+            "attribute_pairs": attribute_pairs if corpus >= 2 else None})
         if parts.loaded:
             typer.echo(f"resuming: {parts.loaded} finished pieces in {parts.path}")
         res = evaluate(prior, families or None, samples, steps, guidance, log=typer.echo,
                        version=corpus, parts=parts.get)
-        if corpus == 2:
+        if corpus >= 2:
             from dbtool.robotize.attributes import (
                 attribute_control,
                 attribute_prompts,
                 legs_control,
             )
 
-            res["attributes"] = attribute_control(prior, attribute_prompts(families or None),
-                                                  n=attribute_pairs, guidance=guidance,
+            rows = attribute_prompts(families or None, corpus)
+            res["attributes"] = attribute_control(prior, rows, n=attribute_pairs, guidance=guidance,
                                                   parts=parts.get)
             right = sum(r["right"] for r in res["attributes"])
             res["attribute_accuracy"] = right / sum(r["pairs"] for r in res["attributes"])

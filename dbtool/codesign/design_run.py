@@ -107,6 +107,7 @@ class Settings:
     prompt_t_min: int = PROMPT_T_MIN  # the prompt guides the steps with t >= this (0: all)
     samples_per_epoch: int | None = None  # designs per embedding epoch; None: the preset's
     sample_steps: int | None = None  # denoising steps per design; None: the preset's
+    prior: int | None = None  # shipped prior version; None: the default (recorded at start)
 
     def configs(self) -> tuple[EmbeddingConfig, CodesignConfig]:
         if self.preset not in PRESETS:
@@ -154,9 +155,10 @@ class DesignRun:
         self.task = get_task(settings.task)
         self.emb_cfg, self.cod_cfg = settings.configs()
         if prior is None:
-            from dbtool.prior.sampling.pipeline import Prior
+            from dbtool.prior.sampling.pipeline import DEFAULT_VERSION, Prior
 
-            prior = Prior.load()
+            settings.prior = settings.prior or DEFAULT_VERSION
+            prior = Prior.load(version=settings.prior)
         self.prior = prior
         start = prior.embed(settings.start) if settings.start else prior.null()
         self.opt = EmbeddingOptimiser(prior, self.task, self.emb_cfg, start, seed=settings.seed,
@@ -224,8 +226,9 @@ class DesignRun:
             ck = torch.load(ck_path, map_location="cpu", weights_only=True)
             if not isinstance(ck, dict) or ck.get("format") != FORMAT:
                 raise RunDirectoryError(f"{ck_path} is not a dbtool run checkpoint")
-            # runs from before the prompt window had the prompt on every step
-            run = cls(path, Settings(**{"prompt_t_min": 0, **ck["settings"]}), prior)
+            # runs from before the prompt window had the prompt on every step, and runs from
+            # before the prior option sampled version 1
+            run = cls(path, Settings(**{"prompt_t_min": 0, "prior": 1, **ck["settings"]}), prior)
             o = run.opt
             o.embedding.load_state_dict(ck["embedding"])
             o.opt.load_state_dict(ck["adam"])

@@ -124,13 +124,15 @@ MEASURES: dict[str, Measure] = {"thickness": thickness, "length": length, "heigh
 
 
 # --------------------------------------------------------------------------- control
-def attribute_prompts(families: list[str] | None = None) -> list[dict]:
-    """For every graded attribute of every family of the attribute corpus: the prompt with
-    its low word and the one with its high word (an attribute without a low word, "tapered",
-    is compared with the plain noun phrase), with the family's part count of shape 0."""
-    from dbtool.prior.corpora import corpus
+def attribute_prompts(families: list[str] | None = None, version: int = 2) -> list[dict]:
+    """For every graded attribute of every family of attribute corpus ``version`` (2 or 3):
+    the prompt with its low word and the one with its high word (an attribute without a low
+    word, "tapered", is compared with the plain noun phrase), with the family's part count of
+    shape 0."""
+    from dbtool.prior.corpora.versions import corpus_module
     from dbtool.prior.corpora.words import ADJECTIVES, count_phrase, noun_phrase
 
+    corpus = corpus_module(version)
     rows = []
     for fam in families or list(corpus.FAMILIES):
         d = corpus.make_shape(fam, 0, "reference", 0, 16).description
