@@ -67,3 +67,32 @@ def test_version_2_card_reports_its_threads_and_training_curve():
     assert "One CPU thread each" not in text
     assert "loss logged every 25 steps" in text
     assert "| 25-50 | 0.7500 | 2 min |" in text and "| 375-400 |" in text
+
+
+def test_version_3_card_has_tokens_scaling_and_the_shared_measure():
+    from pathlib import Path
+
+    _, meta = load_model(weights_dir(2) / "base.pt")
+    meta = {**meta, "model": {**meta["model"], "tokens": 24},
+            "train_config": {**meta["train_config"], "corpus": 3}}
+    ev = _eval_v2()
+    ev["settings"]["corpus"] = 3
+    root = Path(__file__).resolve().parents[1]
+    scaling = json.loads((root / "benchmarks/results/prior-scaling.json").read_text())
+    shared = {"families": ["ball", "worm"], "corpora": [1, 3], "samples": 16,
+              "reference_per_family": 32, "priors": {
+                  "version 1": {"per_family": {"ball": {"accuracy": 1.0},
+                                               "worm": {"accuracy": 0.5}},
+                                "accuracy": 0.75, "min_accuracy": 0.5},
+                  "version 3": {"per_family": {"ball": {"accuracy": 1.0},
+                                               "worm": {"accuracy": 0.875}},
+                                "accuracy": 0.9375, "min_accuracy": 0.875}}}
+    text = card.render(meta, None, ev, None, scaling=scaling, shared=shared)
+    assert text.startswith("# dbtool prior: model card (version 3)")
+    assert "Corpus 3 is corpus 2 with" in text and "token states (up to 24 of them)" in text
+    assert ", 24 token states) |" in text  # the training table names the conditioning
+    tokens = scaling["variants"]["tokens"]
+    assert f"| tokens | {tokens['params'] / 1e6:.2f} M |" in text
+    assert "### Against version 1 on the same references" in text
+    assert "| worm | 0.50 | 0.88 |" in text and "| **mean** | **0.750** | **0.938** |" in text
+    assert "--corpus 3" in text

@@ -110,3 +110,32 @@ def prior_evaluate(
         parts.path.unlink()
     typer.echo(f"accuracy {res['accuracy']:.3f} (lowest family {res['min_accuracy']:.2f}, "
                f"ceiling {res['ceiling']:.3f}) -> {out}")
+
+
+@prior_app.command("shared")
+def prior_shared(
+    versions: list[int] = typer.Argument(..., help="shipped prior versions, e.g. 1 3"),
+    samples: int = typer.Option(16, min=1, help="samples per family"),
+    steps: int = typer.Option(64, min=1, help="sampling steps"),
+    out: Path = typer.Option(Path("runs/prior/shared.json"), help="metrics JSON"),
+) -> None:
+    """Several prior versions on the families version 1 knows, each sample scored against the
+    union of their corpora's references (docs/prior.md). Finished pieces are kept in OUT's
+    ``.parts.json``: an interrupted run resumes there."""
+    from dbtool.prior.sampling.pipeline import Prior
+    from dbtool.prior.training.evaluate import Parts, weights_digest
+    from dbtool.prior.training.shared import shared_measure
+    from dbtool.runs import write_json
+
+    with guarded():
+        priors = {f"version {v}": Prior.load(version=v, with_upsampler=False) for v in versions}
+        parts = Parts(out.with_name(out.stem + ".parts.json"), {
+            "weights": [weights_digest(p.base) for p in priors.values()], "samples": samples,
+            "steps": steps})
+        res = shared_measure(priors, samples=samples, steps=steps, parts=parts.get,
+                             log=typer.echo)
+        write_json(out, res)
+        parts.path.unlink()
+    for name, r in res["priors"].items():
+        typer.echo(f"{name}: 1-NN {r['accuracy']:.3f} (lowest family {r['min_accuracy']:.2f})")
+    typer.echo(f"-> {out}")

