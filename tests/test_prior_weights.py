@@ -120,10 +120,16 @@ def test_a_version_without_upsampler_says_so(tmp_path, monkeypatch):
 
     (tmp_path / "v7").mkdir()
     shutil.copy(pipeline.weights_dir(1) / "base.pt", tmp_path / "v7" / "base.pt")
+    shutil.copytree(pipeline.weights_dir(1), tmp_path / "v1")
     monkeypatch.setattr(pipeline, "WEIGHTS_ROOT", tmp_path)
     assert Prior.load(version=7, with_upsampler=False).upsampler is None
     with pytest.raises(CheckpointError, match="prior v7 has no upsampler; load it with"):
         Prior.load(version=7)
+    # a version may name an earlier version's upsampler (it reads no text)
+    (tmp_path / "v7" / "config.json").write_text('{"upsampler_from": 1}')
+    up = Prior.load(version=7).upsampler
+    assert up is not None and torch.equal(
+        up.out.weight, pipeline.load_model(tmp_path / "v1" / "upsampler.pt")[0].out.weight)
 
 
 def test_a_far_prompt_names_the_nearest_known_captions():

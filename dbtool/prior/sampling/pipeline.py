@@ -62,8 +62,9 @@ class CheckpointError(InputError):
 
 
 def weights_config(folder: Path) -> dict:
-    """A weights folder's ``config.json`` (``{"schedules": {kind: NoiseSchedule.config()}}``),
-    ``{}`` where the folder has none."""
+    """A weights folder's ``config.json`` (``{"schedules": {kind: NoiseSchedule.config()}}``,
+    and ``"upsampler_from": N`` where the version uses version N's upsampler), ``{}`` where
+    the folder has none."""
     path = Path(folder) / CONFIG
     if not path.is_file():
         return {}
@@ -160,10 +161,13 @@ class Prior:
                 model_schedule("base", meta, config if base is None else {}))
         up = None
         if with_upsampler or upsampler is not None:
-            if upsampler is None and not (folder / "upsampler.pt").is_file():
+            # a version may ship the upsampler of an earlier one (it reads no text)
+            up_file = (weights_dir(int(config["upsampler_from"])) if "upsampler_from" in config
+                       else folder) / "upsampler.pt"
+            if upsampler is None and not up_file.is_file():
                 raise CheckpointError(f"the shipped prior {folder.name} has no upsampler; load "
                                       "it with with_upsampler=False or give an upsampler file")
-            up, up_meta = load_model(upsampler or folder / "upsampler.pt", "upsampler")
+            up, up_meta = load_model(upsampler or up_file, "upsampler")
             if not schedulers.get("up_scheduler"):
                 schedulers["up_scheduler"] = DDIMScheduler(model_schedule(
                     "upsampler", up_meta, config if upsampler is None else {}))
