@@ -57,16 +57,23 @@ class AttributeShape(Shape):
     description: Description | None = None
 
 
+def shape_rng(families: dict, version: int, family: str, index: int, split: str,
+              seed: int) -> np.random.Generator:
+    """The generator of shape ``index`` of ``family`` in ``split`` of corpus ``version``
+    (whose builders are ``families``); unknown families and splits are refused."""
+    if family not in families:
+        raise ValueError(f"unknown shape family {family!r}")
+    if split not in SPLITS:
+        raise ValueError(f"unknown split {split!r}; choose one of {', '.join(SPLITS)}")
+    return np.random.default_rng((seed, SPLITS[split], version, list(families).index(family),
+                                  index))
+
+
 def make_shape(family: str, index: int, split: str = "train", seed: int = 0,
                n_points: int = 1024, n_captions: int = CAPTIONS_PER_SHAPE) -> AttributeShape:
     """Shape ``index`` of ``family`` in ``split``, its description and ``n_captions`` captions
     in the split's phrasings (``heldout``: the held-out ones)."""
-    if family not in FAMILIES:
-        raise ValueError(f"unknown shape family {family!r}")
-    if split not in SPLITS:
-        raise ValueError(f"unknown split {split!r}; choose one of {', '.join(SPLITS)}")
-    rng = np.random.default_rng((seed, SPLITS[split], VERSION, list(FAMILIES).index(family),
-                                 index))
+    rng = shape_rng(FAMILIES, VERSION, family, index, split, seed)
     solid, desc = FAMILIES[family](rng)
     pts, mesh = surface_sample(family, solid, rng, n_points)
     caps = captions(desc, rng, n_captions, split)

@@ -19,11 +19,9 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-import numpy as np
-
 from dbtool.prior.corpora import corpus as corpus2
 from dbtool.prior.corpora import revised
-from dbtool.prior.corpora.shapes import SPLITS, collect, surface_sample
+from dbtool.prior.corpora.shapes import collect, surface_sample
 from dbtool.prior.corpora.words import V3, captions
 
 VERSION = 3
@@ -53,12 +51,7 @@ def make_shape(family: str, index: int, split: str = "train", seed: int = 0,
                n_points: int = 1024, n_captions: int = CAPTIONS_PER_SHAPE):
     """Shape ``index`` of ``family`` in ``split`` with its description and captions (as
     :func:`dbtool.prior.corpora.corpus.make_shape`, on corpus 3)."""
-    if family not in FAMILIES:
-        raise ValueError(f"unknown shape family {family!r}")
-    if split not in SPLITS:
-        raise ValueError(f"unknown split {split!r}; choose one of {', '.join(SPLITS)}")
-    rng = np.random.default_rng((seed, SPLITS[split], VERSION, list(FAMILIES).index(family),
-                                 index))
+    rng = corpus2.shape_rng(FAMILIES, VERSION, family, index, split, seed)
     solid, desc = FAMILIES[family](rng)
     desc = replace(desc, nouns=desc.nouns + EXTRA_NOUNS.get(family, ()),
                    count_optional=family not in COUNT_NAMES_FAMILY)
