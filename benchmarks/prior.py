@@ -63,6 +63,7 @@ def train_steps(batch: int, points: int, repeats: int, version: int) -> dict:
     """Seconds per training step of the base model, bf16 autocast and float32 (one thread)."""
     import torch
 
+    from dbtool.prior.sampling import text
     from dbtool.prior.sampling.diffusion import diffusion_loss
     from dbtool.prior.sampling.model import ModelConfig, PointDiffusionTransformer
     from dbtool.prior.sampling.pipeline import load_model, weights_dir
@@ -73,7 +74,9 @@ def train_steps(batch: int, points: int, repeats: int, version: int) -> dict:
     model = PointDiffusionTransformer(cfg)
     opt = torch.optim.AdamW(model.parameters(), 1e-4)
     schedule = NoiseSchedule.cosine()
-    x, c = torch.randn(batch, points, 3), torch.randn(batch, cfg.cond_dim)
+    x = torch.randn(batch, points, 3)
+    c = (text.encode_tokens(["a ball with four legs"] * batch, cfg.tokens) if cfg.tokens
+         else torch.randn(batch, cfg.cond_dim))  # packed token states: a real caption's
     out = {}
     for name, bf16 in (("bf16", True), ("fp32", False)):
         times = []

@@ -96,3 +96,18 @@ def test_version_3_card_has_tokens_scaling_and_the_shared_measure():
     assert "### Against version 1 on the same references" in text
     assert "| worm | 0.50 | 0.88 |" in text and "| **mean** | **0.750** | **0.938** |" in text
     assert "--corpus 3" in text
+
+
+def test_card_names_a_reused_upsampler_and_a_nearly_collapsed_family():
+    """A version that reuses another's upsampler does not tell the reader to train one, and a
+    family whose samples are nearly one shape is named in the limits, not denied."""
+    _, meta = load_model(weights_dir(2) / "base.pt")
+    ev = _eval_v2()
+    ev["settings"]["corpus"] = 3
+    own = card.render(meta, None, ev, None)
+    assert "--kind upsampler --corpus 3" in own and "no family collapses" in own
+    ev["families"]["legged_block"]["spread_ratio"] = 0.03
+    text = card.render(meta, None, ev, None, upsampler_from=2)
+    assert "--kind upsampler" not in text and "the upsampler is version 2's" in text
+    assert "legged_block 0.03" in text and "(legged_block: nearly one shape per prompt)" in text
+    assert "no family collapses" not in text

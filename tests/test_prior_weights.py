@@ -111,6 +111,8 @@ def test_weights_folders_are_versioned():
     with pytest.raises(CheckpointError, match="version 99"):
         Prior.load(version=99)
     assert Prior.load(version=2, with_upsampler=False).corpus == 2
+    v3 = Prior.load(version=3)  # version 3 reads token states and reuses version 2's upsampler
+    assert (v3.corpus, v3.tokens) == (3, 24) and v3.upsampler is not None
 
 
 def test_a_version_without_upsampler_says_so(tmp_path, monkeypatch):

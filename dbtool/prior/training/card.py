@@ -113,6 +113,9 @@ def _quality_rows(ev: dict) -> list[str]:
     return rows
 
 
+COLLAPSE = 0.05  # a spread ratio below this: the samples of a prompt are nearly one shape
+
+
 def _measured_limits(ev: dict) -> list[str]:
     """Weak spots read off the evaluation: distinguishability, diversity, failed paraphrases."""
     fams = ev["families"]
@@ -123,7 +126,10 @@ def _measured_limits(ev: dict) -> list[str]:
            "are softer than the meshes' and thin parts (star arms, legs) are rounder.",
            "- Diversity is below the corpus's: spread ratio "
            + ", ".join(f"{f} {fams[f]['spread_ratio']:.2f}" for f in low)
-           + " for the least varied families (no family collapses to one shape)."]
+           + " for the least varied families"
+           + (f" ({', '.join(f for f in low if fams[f]['spread_ratio'] < COLLAPSE)}: nearly one "
+              "shape per prompt)." if fams[low[0]]["spread_ratio"] < COLLAPSE
+              else " (no family collapses to one shape).")]
     bad = [p for p, r in ev.get("paraphrases", {}).items() if r["accuracy"] < 0.5]
     if bad:
         out.append("- Paraphrases that miss their family: " + ", ".join(f'"{p}"' for p in bad)
@@ -248,19 +254,25 @@ def _speed_section(bench: dict | None) -> list[str]:
     return out
 
 
-def _reproduce_and_limits(ev: dict, version: int) -> list[str]:
-    """The commands that rebuild the weights and the card, and the model's limits."""
+def _reproduce_and_limits(ev: dict, version: int, upsampler_from: int | None = None
+                          ) -> list[str]:
+    """The commands that rebuild the weights and the card, and the model's limits.
+    ``upsampler_from``: the version whose upsampler this one reuses (None: its own)."""
     corpus_flag = f" --corpus {version}" if version != 1 else ""
+    upsampler = [
+        f"dbtool prior train --kind upsampler{corpus_flag}",
+        f"dbtool prior export runs/prior/upsampler -o dbtool/prior/weights/v{version}/"
+        "upsampler.pt"] if upsampler_from is None else [
+        f"# the upsampler is version {upsampler_from}'s (weights/v{version}/config.json: "
+        f"upsampler_from)"]
     return [
         "## Reproduce", "", "```bash",
         f"dbtool prior train --kind base{corpus_flag}          # --resume continues after an "
         "interruption",
-        f"dbtool prior train --kind upsampler{corpus_flag}",
         f"dbtool prior export runs/prior/base -o dbtool/prior/weights/v{version}/base.pt",
-        f"dbtool prior export runs/prior/upsampler -o dbtool/prior/weights/v{version}/"
-        "upsampler.pt",
+        *upsampler,
         f"dbtool prior evaluate{corpus_flag} --out runs/prior/eval.json",
-        "python benchmarks/prior.py",
+        "python benchmarks/prior.py" + (f" --version {version}" if version != 1 else ""),
         f"python -m dbtool.prior.training.card runs/prior/eval.json --version {version}  "
         f"# shipped as weights/v{version}/eval.json",
         "```", "",
@@ -275,7 +287,8 @@ def _reproduce_and_limits(ev: dict, version: int) -> list[str]:
 
 def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None,
            old: tuple[dict, dict] | None = None, curve: list[dict] | None = None,
-           scaling: dict | None = None, shared: dict | None = None) -> str:
+           scaling: dict | None = None, shared: dict | None = None,
+           upsampler_from: int | None = None) -> str:
     """The card's markdown. ``old``: version 1's evaluation and this model's on version 1's
     families; ``curve``: the base model's training log; ``scaling``: the short runs its size
     was chosen from; ``shared``: this model and version 1 against the same references."""
@@ -292,7 +305,7 @@ def render(base_meta: dict, up_meta: dict | None, ev: dict, bench: dict | None,
     out += shared_section(shared)
     out += _interpolation_section(ev)
     out += _speed_section(bench)
-    out += _reproduce_and_limits(ev, version)
+    out += _reproduce_and_limits(ev, version, upsampler_from)
     return "\n".join(out)
 
 
@@ -300,7 +313,7 @@ def main(argv: list[str] | None = None) -> None:
     import argparse
     import json
 
-    from dbtool.prior.sampling.pipeline import load_model, weights_dir
+    from dbtool.prior.sampling.pipeline import load_model, weights_config, weights_dir
 
     p = argparse.ArgumentParser(description="Render MODEL_CARD.md from measured files.")
     p.add_argument("eval", type=Path, help="JSON written by `dbtool prior evaluate`")
@@ -326,8 +339,14 @@ def main(argv: list[str] | None = None) -> None:
     old = tuple(json.loads(f.read_text()) for f in a.old) if a.old else None
     curve = ([json.loads(x) for x in a.log.read_text().splitlines() if x.strip()]
              if a.log else None)
+    run_manifest = a.log.with_name("manifest.json") if a.log else None
+    if base["train_config"].get("bf16") is None and run_manifest and run_manifest.is_file():
+        # "where the CPU has it": what the training machine had (the run's manifest)
+        base["train_config"]["bf16"] = json.loads(run_manifest.read_text())["machine"].get(
+            "bf16_native")
     scaling, shared = (json.loads(f.read_text()) if f else None for f in (a.scaling, a.shared))
-    text = render(base, up, json.loads(a.eval.read_text()), bench, old, curve, scaling, shared)
+    text = render(base, up, json.loads(a.eval.read_text()), bench, old, curve, scaling, shared,
+                  weights_config(folder).get("upsampler_from"))
     tmp = out.with_suffix(".tmp")
     tmp.write_text(text)
     tmp.replace(out)
