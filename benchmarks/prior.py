@@ -25,12 +25,18 @@ Usage::
     python benchmarks/prior.py --quick       # smoke test: batch 1 and 4, 8 steps
     python benchmarks/prior.py --threads 1 --out /tmp/prior.json
     python benchmarks/prior.py --version 2  # another shipped version's weights
+    python benchmarks/prior.py --isa avx2 --epoch  # one epoch's sampling, AVX2 kernels only
+
+``--isa avx2`` runs every case with PyTorch's, oneDNN's and MKL's kernels limited to AVX2 and
+in float32 (an AVX2 CPU has no native bfloat16): on a newer CPU it measures the instruction set
+of an AVX2 laptop, though not its clock or memory (docs/prior.md, "Precision and speed").
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -42,6 +48,10 @@ DEFAULT_OUT = ROOT / "benchmarks" / "results" / "prior.json"
 GOAL_EPOCH_S = 60.0  # 60 designs (one epoch) in under a minute
 CASES = [("base", 1, 64), ("base", 16, 64), ("base", 60, 64), ("base", 60, 32),
          ("upsampler", 16, 32), ("train", 32, 256)]
+EPOCH_CASES = [("base", 60, 32)]
+# environment that limits the kernels to AVX2 (PyTorch's dispatch, oneDNN, MKL) in float32
+ISA_ENV = {"avx2": {"ATEN_CPU_CAPABILITY": "avx2", "ONEDNN_MAX_CPU_ISA": "AVX2",
+                    "MKL_ENABLE_INSTRUCTIONS": "AVX2", "DBTOOL_BF16": "0"}}
 QUICK_CASES = [("base", 1, 8), ("base", 4, 8), ("upsampler", 2, 4), ("train", 4, 64)]
 
 
@@ -132,7 +142,8 @@ def worker(kind: str, batch: int, steps: int, repeats: int, threads: int | None,
     return {"kind": kind, "batch": batch, "steps": steps, "seconds": sec,
             "samples_per_s": batch / sec, "peak_mib": (_rss("VmHWM") - base_rss) / 2**20,
             "threads": torch.get_num_threads(), "repeats": repeats,
-            "precision": "bf16" if use_bf16("cpu", prior.bf16) else "fp32"}
+            "precision": "bf16" if use_bf16("cpu", prior.bf16) else "fp32",
+            "kernels": torch.backends.cpu.get_cpu_capability()}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -145,6 +156,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, default=None, help="JSON output path")
     p.add_argument("--version", type=int, default=DEFAULT_VERSION,
                    help=f"shipped prior version (default {DEFAULT_VERSION})")
+    p.add_argument("--isa", choices=sorted(ISA_ENV), help="limit the kernels to this "
+                   "instruction set (float32)")
+    p.add_argument("--epoch", action="store_true", help="only one epoch's sampling (60 x 32)")
     p.add_argument("--worker", nargs=3, metavar=("KIND", "BATCH", "STEPS"), help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     repeats = a.repeats or (1 if a.quick else 3)
@@ -154,11 +168,13 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
     rows = []
-    for kind, batch, steps in QUICK_CASES if a.quick else CASES:
+    cases = QUICK_CASES if a.quick else EPOCH_CASES if a.epoch else CASES
+    env = {**os.environ, **ISA_ENV.get(a.isa, {})}
+    for kind, batch, steps in cases:
         cmd = [sys.executable, __file__, "--worker", kind, str(batch), str(steps),
                "--repeats", str(repeats), "--version", str(a.version)] + (
             ["--threads", str(a.threads)] if a.threads else [])
-        out = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+        out = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env=env)
         if out.returncode != 0:
             print(out.stderr[-2000:], file=sys.stderr)
             print(f"error: case {kind} batch {batch} failed", file=sys.stderr)
@@ -192,9 +208,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{best['steps']} steps (goal < {GOAL_EPOCH_S:.0f} s: {verdict})")
     from _results import write_result
 
-    config = {"benchmark": "prior", "cases": QUICK_CASES if a.quick else CASES,
-              "repeats": repeats, "threads": a.threads, "quick": a.quick,
-              "prior_version": a.version}
+    config = {"benchmark": "prior", "cases": cases, "repeats": repeats, "threads": a.threads,
+              "quick": a.quick, "prior_version": a.version, "isa": a.isa}
     write_result({"goal_epoch_s": GOAL_EPOCH_S, "cases": rows}, a.out, DEFAULT_OUT, a.quick,
                  config)  # the provenance's machine records bf16_native
     return 0
