@@ -5,8 +5,13 @@ SEED --prior VERSION --run-dir ...``) and, per task, pairs the two versions seed
 final design's task metric (``design.npz``), the mean metric of the embedding's first and last
 epoch (``metrics.jsonl``), and the paired difference of the final metrics (mean, standard
 deviation, z = mean / (sd / sqrt(n)), seeds where the second version is higher). Only seeds
-finished on both versions count. Prints a table and writes
-``benchmarks/results/prior-designs.json``.
+finished on both versions count.
+
+A metric can rise because a body falls: a tall crawler that tips forward moves its centre along
++x. So each final design is simulated again with its controller and the task's metric is read at
+every ``EVERY`` control steps, with the height of the robot's presence-weighted centre: a run
+whose metric grows while its centre drops and then stops growing fell rather than crawled.
+Prints a table and writes ``benchmarks/results/prior-designs.json``.
 
 Usage::
 
@@ -27,6 +32,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from _results import write_result  # noqa: E402
 
 DEFAULT_OUT = Path(__file__).parent / "results" / "prior-designs.json"
+EVERY = 20  # control steps between the re-simulated design's metric readings
 NAME = re.compile(r"^(?P<task>[a-z]+)-p(?P<version>\d+)-s(?P<seed>\d+)$")
 
 
@@ -42,7 +48,34 @@ def read_run(folder: Path) -> dict | None:
     manifest = json.loads((folder / "manifest.json").read_text())
     design = Design.load(folder / "design.npz")
     return {"metric": float(design.metrics[design.task]),
-            "epoch_means": epochs, "commit": manifest.get("commit")}
+            "epoch_means": epochs, "commit": manifest.get("commit"),
+            **(replay(design) if REPLAY else {})}
+
+
+REPLAY = True  # re-simulate each final design (off in the tests: no simulator there)
+
+
+def replay(design) -> dict:
+    """The task metric every ``EVERY`` control steps of the final design's episode and the
+    height of the robot's presence-weighted centre above its start (m)."""
+    import torch
+
+    from dbtool.sim.rollout import simulate
+    from dbtool.sim.tasks import get_task
+    from dbtool.sim.tasks.base import centroid
+
+    task = get_task(design.task)
+    ro = simulate(task, design.robot.compact(), design.controller)
+    ep, pos = ro.episode, torch.tensor(ro.positions, dtype=torch.float64)
+    w = torch.tensor(ep.particles.presence, dtype=torch.float64)
+    m = ep.robot_mask
+    steps = list(range(0, len(pos), EVERY))
+    if steps[-1] != len(pos) - 1:
+        steps.append(len(pos) - 1)
+    y0 = float(centroid(pos[0][m], w[m])[1])
+    return {"replay_metric": ro.metric, "steps": steps,
+            "metric_at": [float(task.metric(ep, pos[0], pos[k], w)) for k in steps],
+            "centre_rise_at": [float(centroid(pos[k][m], w[m])[1]) - y0 for k in steps]}
 
 
 def paired(a: list[float], b: list[float]) -> dict:
@@ -80,6 +113,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| seed | prior {va} | prior {vb} |\n|---:|---:|---:|")
         for r, x, y in zip(rows, fa, fb, strict=True):
             print(f"| {r['seed']} | {x:.5f} | {y:.5f} |")
+        for r in rows:
+            for v in (va, vb):
+                run = r[f"v{v}"]
+                if "metric_at" in run:
+                    print(f"  seed {r['seed']} prior {v}: metric at steps {run['steps']}: "
+                          + " ".join(f"{x:.4f}" for x in run["metric_at"]) + "; centre rise mm: "
+                          + " ".join(f"{1000 * x:.1f}" for x in run["centre_rise_at"]))
         st = result[task]["paired"]
         print(f"mean {_mean(fa):.5f} | {_mean(fb):.5f}; paired difference {st['mean']:.5f} "
               f"(sd {st['sd']:.5f}, z {st['z']:.2f}, higher on {st['higher']} of {st['n']})")
