@@ -77,6 +77,36 @@ def test_composition_with_one_term_equals_plain_guidance():
     assert torch.allclose(guided_eps(m, x, t, [(c, s), (c2, 2.0)]), both, atol=1e-5)
 
 
+def test_guidance_interval_guides_inside_and_drops_the_unconditional_pass_outside():
+    """Outside ``interval`` one term gives its conditional prediction in one model pass, two
+    terms their scale-weighted conditional predictions; inside, guidance is unchanged."""
+    m, x = tiny_model(), torch.randn(2, 32, 3)
+    c, c2 = torch.randn(1, 384), torch.randn(1, 384)
+    calls = []
+
+    def model(x, t, cond):
+        calls.append(len(x))
+        return m(x, t, cond)
+
+    for t in (100, 400):  # inside [0, 400]: plain guidance, two rows per sample
+        calls.clear()
+        assert torch.equal(guided_eps(model, x, t, [(c, 3.0)], interval=(0, 400)),
+                           guided_eps(m, x, t, [(c, 3.0)]))
+        assert calls == [4]
+    calls.clear()
+    tt = torch.full((2,), 800)
+    cond = m(x, tt, c.expand(2, 384))
+    assert torch.allclose(guided_eps(model, x, 800, [(c, 3.0)], interval=(0, 400)), cond,
+                          atol=1e-6)
+    assert calls == [2]  # one pass, no unconditional rows
+    mix = 0.6 * cond + 0.4 * m(x, tt, c2.expand(2, 384))
+    assert torch.allclose(guided_eps(m, x, 800, [(c, 3.0), (c2, 2.0)], interval=(0, 400)), mix,
+                          atol=1e-5)
+    # a negative scale (steering away) keeps its guidance everywhere
+    assert torch.equal(guided_eps(m, x, 800, [(c, 3.0), (c2, -1.0)], interval=(0, 400)),
+                       guided_eps(m, x, 800, [(c, 3.0), (c2, -1.0)]))
+
+
 def test_guidance_with_grad_is_the_same_prediction_and_differentiates_the_conditions():
     m, x = tiny_model(), torch.randn(2, 32, 3)
     t = torch.tensor([100, 800])  # one timestep per sample, as in the embedding's loss
@@ -213,6 +243,34 @@ def test_training_resumes_bit_for_bit_after_an_interruption(tmp_path, monkeypatc
     assert meta["kind"] == "base" and meta["steps"] == 6 and meta["final_loss"] > 0
     with pytest.raises(CheckpointError, match="not the upsampler model"):
         load_model(path, "upsampler")
+
+
+def test_a_fine_tune_starts_from_the_checkpoints_weights(tmp_path):
+    """``init``: the model and EMA weights of another run's checkpoint, its model and corpus
+    settings, a fresh optimiser and schedule; the run then resumes like any other."""
+    from dbtool.prior.training.train import finetune_config
+
+    cfg = TrainConfig(kind="base", steps=2, batch=2, subset=16, per_family=1, ckpt_every=2,
+                      log_every=1, warmup=1, model=ModelConfig(**TINY))
+    corpus = tmp_path / "corpus"
+    train(cfg, tmp_path / "first", cache_dir=corpus, show_progress=False)
+    init = tmp_path / "first" / "checkpoint.pt"
+    tune = finetune_config(init, steps=0, lr=1e-4)
+    assert tune.init == str(init) and tune.model == cfg.model and tune.lr == 1e-4
+    assert tune.corpus == cfg.corpus and tune.warmup == 100
+    train(tune, tmp_path / "tune", cache_dir=corpus, show_progress=False)  # 0 steps: a copy
+    first = torch.load(init, weights_only=True)
+    tuned = torch.load(tmp_path / "tune" / "checkpoint.pt", weights_only=True)
+    for part in ("model", "ema"):
+        for k, v in first[part].items():
+            assert torch.equal(v, tuned[part][k]), (part, k)
+    assert tuned["step"] == 0 and not tuned["opt"]["state"]
+    resumed = resumed_config(tmp_path / "tune", 2)
+    assert resumed.init == str(init)
+    train(resumed, tmp_path / "tune", resume=True, cache_dir=corpus, show_progress=False)
+    assert len(read_log(tmp_path / "tune")) == 2
+    with pytest.raises(FileNotFoundError, match="no training checkpoint"):
+        finetune_config(tmp_path / "missing.pt")
 
 
 def test_bad_checkpoints_are_named(tmp_path):

@@ -132,6 +132,20 @@ def test_a_version_without_upsampler_says_so(tmp_path, monkeypatch):
     up = Prior.load(version=7).upsampler
     assert up is not None and torch.equal(
         up.out.weight, pipeline.load_model(tmp_path / "v1" / "upsampler.pt")[0].out.weight)
+    # and the steps its guidance is limited to (docs/prior.md)
+    assert Prior.load(version=7, with_upsampler=False).guidance_interval is None
+    (tmp_path / "v7" / "config.json").write_text('{"guidance_interval": [0, 400]}')
+    assert Prior.load(version=7, with_upsampler=False).guidance_interval == (0, 400)
+
+
+@pytest.mark.parametrize("text", ["400", "a:b", "500:100", "-1:10"])
+def test_a_bad_guidance_interval_is_one_line(text):
+    from dbtool.cli.prior import parse_interval
+    from dbtool.errors import InputError
+
+    with pytest.raises(InputError, match="guidance interval"):
+        parse_interval(text)
+    assert parse_interval("0:400") == (0, 400)
 
 
 def test_a_far_prompt_names_the_nearest_known_captions():

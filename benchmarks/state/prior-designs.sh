@@ -1,6 +1,7 @@
 #!/bin/bash
 # Issue 39 item 5: design runs (quick) on priors 1 and 3, seeds 0-3, then the embedding
 # experiments on prior 3. Resumable: finished runs are skipped, unfinished ones resumed.
+# PRIORS (default "1 3") picks the prior versions; EMBEDDING=0 skips the embedding part.
 source ~/venv/bin/activate
 T=~/.cache/dbtool/item5/tree
 R=~/.cache/dbtool/item5/runs
@@ -9,7 +10,7 @@ cd $T
 export PYTHONPATH=$T
 for seed in 0 1 2 3; do
   for task in crawling gripping; do
-    for p in 1 3; do
+    for p in ${PRIORS:-1 3}; do
       d=$R/$task-p$p-s$seed
       if [ -f $d/design.npz ]; then continue; fi
       echo "$(date +%T) design $task prior $p seed $seed"
@@ -22,6 +23,7 @@ for seed in 0 1 2 3; do
     done
   done
 done
+[ "${EMBEDDING:-1}" = 0 ] && exit 0
 for space in free mixture; do
   echo "$(date +%T) embedding $space prior 3"
   python benchmarks/codesign.py embedding --space $space --prior 3 --seeds 0 1 2 3 --tasks crawling gripping || exit 1

@@ -246,7 +246,7 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
         eta = min(cfg.step_scale * beta, 1.0 - ab)
         sigma = cfg.sigma_beta * beta
         for k in range(cfg.K):
-            eps = guided_eps(prior.eps, x, t, conds)
+            eps = guided_eps(prior.eps, x, t, conds, interval=prior.guidance_interval)
             model_score = -eps / sched.sigma(t)
             row = {"t": t, "k": k, "score_rms": rms(model_score)}
             drift, move = model_score, 0.0
@@ -258,7 +258,8 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
             if on_step is not None:
                 on_step(row)
         step.x = x
-        x0 = sched.predict_x0(x, t, guided_eps(prior.eps, x, t, conds))
+        x0 = sched.predict_x0(x, t, guided_eps(prior.eps, x, t, conds,
+                                                  interval=prior.guidance_interval))
         trajectory.append(Stop(t, x[0].numpy() / SCALE, x0[0].numpy() / SCALE))
     cloud = last.x[0].numpy() / SCALE
     return CodesignResult(cloud, chain.phi, history, chain.best, trajectory)

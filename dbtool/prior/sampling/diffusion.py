@@ -66,13 +66,13 @@ class Step:
 
 def denoise(scheduler: Scheduler, model: EpsModel, x_T: torch.Tensor,
             conds: Sequence[tuple], steps: int = 64, t_start: int | None = None,
-            include: Sequence[int] = (), generator: torch.Generator | None = None
-            ) -> Iterator[Step]:
+            include: Sequence[int] = (), generator: torch.Generator | None = None,
+            interval: tuple[int, int] | None = None) -> Iterator[Step]:
     """Denoise ``x_T`` with composed classifier-free guidance; yields before every update.
 
-    ``conds`` is a list of ``(embedding (B or 1, D), guidance scale)``; see :func:`guided_eps`.
-    After the last update the generator yields a final :class:`Step` with ``t = -1`` whose
-    ``x`` is the sample."""
+    ``conds`` is a list of ``(embedding (B or 1, D), guidance scale)``; see :func:`guided_eps`
+    (and its ``interval``). After the last update the generator yields a final :class:`Step`
+    with ``t = -1`` whose ``x`` is the sample."""
     ts = scheduler.timesteps(steps, t_start, include)
     x, x0 = x_T, None
     for i, t in enumerate(ts):
@@ -80,13 +80,23 @@ def denoise(scheduler: Scheduler, model: EpsModel, x_T: torch.Tensor,
         step = Step(i, t, t_prev, x, x0)
         yield step
         x = step.x
-        eps = guided_eps(model, x, t, conds)
+        eps = guided_eps(model, x, t, conds, interval=interval)
         x, x0 = scheduler.step(eps, t, t_prev, x, generator)
     yield Step(len(ts), -1, -1, x, x0)
 
 
+def unguided(conds: Sequence[tuple]) -> list[tuple]:
+    """The terms with their scales divided by their sum: the weighted conditional predictions
+    without the unconditional one (with one term, its conditional prediction). Terms whose
+    scales do not sum to a positive number stay as they are."""
+    total = sum(float(c[1]) for c in conds)
+    if total <= 0 or any(float(c[1]) < 0 for c in conds):
+        return list(conds)
+    return [(c[0], float(c[1]) / total, *c[2:]) for c in conds]
+
+
 def guided_eps(model: EpsModel, x: torch.Tensor, t: int | torch.Tensor, conds: Sequence[tuple],
-               grad: bool = False) -> torch.Tensor:
+               grad: bool = False, interval: tuple[int, int] | None = None) -> torch.Tensor:
     """Composed classifier-free guidance (docs/method.md §6):
     ``eps = eps(x, null) + sum_i s_i (eps(x, c_i) - eps(x, null))``.
 
@@ -97,11 +107,21 @@ def guided_eps(model: EpsModel, x: torch.Tensor, t: int | torch.Tensor, conds: S
     as one batch. ``t`` is one timestep or one per sample (windowed terms need one).
 
     ``grad``: differentiable w.r.t. the conditions (the embedding's training loss,
-    docs/method.md §4); the unconditional prediction then runs apart, without a graph."""
+    docs/method.md §4); the unconditional prediction then runs apart, without a graph.
+
+    ``interval = (t_lo, t_hi)``: guidance only at the steps with ``t_lo <= t <= t_hi``; at the
+    others the scales are normalised to sum to one (:func:`unguided`), so the unconditional
+    prediction drops out and one term costs one model pass instead of two (guidance in a
+    limited interval, docs/method.md §1)."""
     if not conds:
         raise ValueError("guidance needs at least one condition")
     conds = [(c[0], c[1]) for c in conds if len(c) < 3 or t >= c[2]] or [
         (conds[0][0], 0.0)]  # every term windowed out: the unconditional prediction
+    t_max = int(t.max()) if isinstance(t, torch.Tensor) else int(t)
+    outside = interval is not None and not interval[0] <= t_max <= interval[1]
+    if outside:
+        conds = unguided(conds)
+        outside = all(s >= 0 for _, s in conds) and abs(sum(s for _, s in conds) - 1) < 1e-9
     b = x.shape[0]
     dim = conds[0][0].shape[-1]
     dev = x.device
@@ -111,6 +131,10 @@ def guided_eps(model: EpsModel, x: torch.Tensor, t: int | torch.Tensor, conds: S
         if len(conds) == 1 and conds[0][1] == 1.0:  # plain conditional prediction: one pass
             return model(x, tt, conds[0][0].to(dev).expand(b, dim)).float()
         embs = [(c.expand(b, dim) if c.shape[0] == 1 else c).to(dev) for c, _ in conds]
+        if outside and not grad:  # normalised scales: the unconditional prediction cancels
+            out = model(x.repeat(len(embs), 1, 1), tt.repeat(len(embs)),
+                        torch.cat(embs)).float().view(len(embs), b, *x.shape[1:])
+            return sum(s * out[k] for k, (_, s) in enumerate(conds))
         null = torch.zeros(b, dim, device=dev)
         if grad:
             with torch.no_grad():

@@ -142,6 +142,8 @@ class Prior:
                  up_scheduler: Scheduler | None = None) -> None:
         self.base, self.upsampler, self.bf16 = base, upsampler, bf16
         self.corpus = 1  # the corpus version the base model was trained on (set by load)
+        # (t_lo, t_hi): guidance only at these steps (a weights folder's config sets it)
+        self.guidance_interval: tuple[int, int] | None = None
         self.scheduler = scheduler or DDPMScheduler(schedule_for("base"))
         self.up_scheduler = up_scheduler or DDIMScheduler(schedule_for("upsampler"))
 
@@ -173,6 +175,9 @@ class Prior:
                     "upsampler", up_meta, config if upsampler is None else {}))
         prior = cls(model, up, **schedulers)
         prior.corpus = int(meta.get("train_config", meta).get("corpus", 1))
+        if base is None and config.get("guidance_interval"):
+            lo, hi = config["guidance_interval"]
+            prior.guidance_interval = (int(lo), int(hi))
         return prior
 
     # ------------------------------------------------------------------ conditions
@@ -224,7 +229,7 @@ class Prior:
         if x_T is None:
             x_T = torch.randn((n, points, 3), generator=gen)
         return denoise(scheduler or self.scheduler, self.eps, x_T, conds, steps, t_start,
-                       include, gen)
+                       include, gen, self.guidance_interval)
 
     def sample(self, prompts: Sequence[str] | str | None = None, n: int = 1,
                guidance: float = 3.0, steps: int = 64, seed: int = 0,

@@ -254,7 +254,8 @@ def evaluate(prior: Prior, families: list[str] | None = None, samples: int = 16,
     res: dict = {"families": {}, "settings": {
         "samples": samples, "steps": steps, "guidance": guidance, "seed": seed, "eta": eta,
         "reference_per_family": reference_per_family, "heldout_per_family": heldout_per_family,
-        "metric_points": metric_points, "corpus": version}}
+        "metric_points": metric_points, "corpus": version,
+        "guidance_interval": list(prior.guidance_interval) if prior.guidance_interval else None}}
     run = EvalRun(prior, samples, steps, guidance, seed, metric_points, version,
                   scheduler_for(eta, prior.scheduler.schedule), ref, ref_lab)
     _families(run, fams, held, held_lab, ceiling, res, parts, log)

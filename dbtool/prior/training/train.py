@@ -63,6 +63,7 @@ class TrainConfig:
     ckpt_every: int = 250
     log_every: int = 25
     model: ModelConfig = field(default_factory=ModelConfig)
+    init: str = ""  # a checkpoint whose model and EMA weights start the run (a fine-tune)
 
     def __post_init__(self) -> None:
         if self.kind not in ("base", "upsampler"):
@@ -95,16 +96,35 @@ def preset(kind: str, **overrides) -> TrainConfig:
     return cfg
 
 
+def finetune_config(init: Path, **overrides) -> TrainConfig:
+    """A run that starts from the weights of the checkpoint ``init`` (its model, EMA and
+    model configuration; a fresh optimiser and learning-rate schedule): by default 8,000 steps
+    from ``lr = 3e-4``, on the checkpoint's corpus version as the code builds it now."""
+    saved = checkpoint_config(Path(init))
+    cfg = TrainConfig(**{**saved, "corpus_digest": "", "steps": 8000, "lr": 3e-4,
+                         "warmup": 100, "init": str(init)})
+    for key, value in overrides.items():
+        if value is not None:
+            setattr(cfg, key, value)
+    return cfg
+
+
+def checkpoint_config(ckpt_path: Path) -> dict:
+    """The training configuration saved in the checkpoint ``ckpt_path``."""
+    if not ckpt_path.is_file():
+        raise MissingFileError(f"no training checkpoint at {ckpt_path}")
+    try:
+        return torch.load(ckpt_path, weights_only=True, map_location="cpu")["config"]
+    except Exception as exc:  # noqa: BLE001 - any unreadable checkpoint gets one message
+        raise InputError(f"not a readable training checkpoint: {ckpt_path}") from exc
+
+
 def resumed_config(run_dir: Path, steps: int | None = None) -> TrainConfig:
     """The configuration saved in ``run_dir/checkpoint.pt`` (optionally with more steps)."""
     ckpt_path = Path(run_dir) / "checkpoint.pt"
     if not ckpt_path.is_file():
         raise MissingFileError(f"nothing to resume: {ckpt_path} does not exist")
-    try:
-        saved = torch.load(ckpt_path, weights_only=True, map_location="cpu")["config"]
-    except Exception as exc:  # noqa: BLE001 - any unreadable checkpoint gets one message
-        raise InputError(f"not a readable training checkpoint: {ckpt_path}") from exc
-    cfg = TrainConfig(**saved)
+    cfg = TrainConfig(**checkpoint_config(ckpt_path))
     if steps is not None:
         cfg.steps = steps
     return cfg
@@ -238,6 +258,12 @@ def initial_state(cfg: TrainConfig, ckpt_path: Path, run_dir: Path) -> TrainStat
         if cfg.steps < state.start:
             raise InputError(f"{run_dir} is already at step {state.start}; --steps {cfg.steps} "
                              "would go back")
+    elif cfg.init:
+        if not Path(cfg.init).is_file():
+            raise MissingFileError(f"the checkpoint to start from does not exist: {cfg.init}")
+        ck = torch.load(cfg.init, weights_only=True, map_location="cpu")
+        model.load_state_dict(ck["model"])
+        ema.load_state_dict(ck["ema"])
     return state
 
 
