@@ -71,7 +71,9 @@ V3 = Phrasing(
                            # material words after "an": version 3's first run read the
                            # article as a shape cue ("an elastic sphere" drew eggs)
                            "an elastomer {bare}", "an inflatable {bare}", "an actuated {bare}",
-                           "an ultra-soft {bare}", "an untethered {bare}"),
+                           "an ultra-soft {bare}", "an untethered {bare}",
+                           # and words of stretch, which it read as "long"
+                           "a stretchy {bare}", "a stretchable {bare}", "a springy {bare}"),
     adjectives={**ADJECTIVES,
                 "length": (("short", "stubby", "compact"), ("long", "elongated")),
                 "height": (("flat", "low", "shallow"), ("tall", "high", "lofty")),

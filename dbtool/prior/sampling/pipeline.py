@@ -63,7 +63,8 @@ class CheckpointError(InputError):
 
 def weights_config(folder: Path) -> dict:
     """A weights folder's ``config.json`` (``{"schedules": {kind: NoiseSchedule.config()}}``,
-    and ``"upsampler_from": N`` where the version uses version N's upsampler), ``{}`` where
+    ``"upsampler_from": N`` where the version uses version N's upsampler and
+    ``"guidance_interval": [LO, HI]`` where its guidance is limited to those steps), ``{}`` where
     the folder has none."""
     path = Path(folder) / CONFIG
     if not path.is_file():
