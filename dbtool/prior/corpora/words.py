@@ -67,13 +67,7 @@ class Phrasing:
 V2 = Phrasing()
 V3 = Phrasing(
     templates=TEMPLATES + ("a flexible {bare}", "a rubber {bare}", "something like {np}",
-                           "a soft robot that looks like {np}", "an object shaped like {np}",
-                           # material words after "an": version 3's first run read the
-                           # article as a shape cue ("an elastic sphere" drew eggs)
-                           "an elastomer {bare}", "an inflatable {bare}", "an actuated {bare}",
-                           "an ultra-soft {bare}", "an untethered {bare}",
-                           # and words of stretch, which it read as "long"
-                           "a stretchy {bare}", "a stretchable {bare}", "a springy {bare}"),
+                           "a soft robot that looks like {np}", "an object shaped like {np}"),
     adjectives={**ADJECTIVES,
                 "length": (("short", "stubby", "compact"), ("long", "elongated")),
                 "height": (("flat", "low", "shallow"), ("tall", "high", "lofty")),
