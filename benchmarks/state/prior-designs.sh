@@ -3,7 +3,7 @@
 # experiments on prior 3. Resumable: finished runs are skipped, unfinished ones resumed.
 # PRIORS (default "1 3") picks the prior versions; EMBEDDING=0 skips the embedding part.
 source ~/venv/bin/activate
-T=~/.cache/dbtool/item5/tree
+T=~/.cache/dbtool/item5/tree  # git worktree at 7156fd5 (version 3 with its guidance interval)
 R=~/.cache/dbtool/item5/runs
 mkdir -p $R
 cd $T

@@ -195,7 +195,10 @@ def _architecture_training_quality(base_meta: dict, metas: dict, ev: dict, bench
         "## Quality", "",
         f"Settings: {s['samples']} samples per family from its prompt, "
         f"{'strided DDPM' if s.get('eta', 0) == 1 else 'DDIM'} with {s['steps']} steps, "
-        f"guidance {s['guidance']}, seed {s['seed']}; Chamfer on {s['metric_points']} points. "
+        f"guidance {s['guidance']}"
+        + (" at the steps with {} <= t <= {} (docs/method.md §1)".format(*s["guidance_interval"])
+           if s.get("guidance_interval") else "")
+        + f", seed {s['seed']}; Chamfer on {s['metric_points']} points. "
         "A sample is correct when its single nearest reference shape (Chamfer) belongs to the "
         "prompted family (1-NN accuracy); the ceiling is the same rule applied to real "
         "held-out shapes. 1-NNA is the leave-one-out 1-nearest-neighbour accuracy between the "
