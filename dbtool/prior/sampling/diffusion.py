@@ -85,13 +85,13 @@ def denoise(scheduler: Scheduler, model: EpsModel, x_T: torch.Tensor,
     yield Step(len(ts), -1, -1, x, x0)
 
 
-def unguided(conds: Sequence[tuple]) -> list[tuple]:
+def unguided(conds: Sequence[tuple]) -> list[tuple] | None:
     """The terms with their scales divided by their sum: the weighted conditional predictions
-    without the unconditional one (with one term, its conditional prediction). Terms whose
-    scales do not sum to a positive number stay as they are."""
+    without the unconditional one (with one term, its conditional prediction); None where a
+    scale is negative or they do not sum to a positive number (guidance stays)."""
     total = sum(float(c[1]) for c in conds)
     if total <= 0 or any(float(c[1]) < 0 for c in conds):
-        return list(conds)
+        return None
     return [(c[0], float(c[1]) / total, *c[2:]) for c in conds]
 
 
@@ -118,10 +118,10 @@ def guided_eps(model: EpsModel, x: torch.Tensor, t: int | torch.Tensor, conds: S
     conds = [(c[0], c[1]) for c in conds if len(c) < 3 or t >= c[2]] or [
         (conds[0][0], 0.0)]  # every term windowed out: the unconditional prediction
     t_max = int(t.max()) if isinstance(t, torch.Tensor) else int(t)
-    outside = interval is not None and not interval[0] <= t_max <= interval[1]
-    if outside:
-        conds = unguided(conds)
-        outside = all(s >= 0 for _, s in conds) and abs(sum(s for _, s in conds) - 1) < 1e-9
+    normalised = (unguided(conds) if interval is not None
+                  and not interval[0] <= t_max <= interval[1] else None)
+    outside = normalised is not None
+    conds = normalised or conds
     b = x.shape[0]
     dim = conds[0][0].shape[-1]
     dev = x.device
