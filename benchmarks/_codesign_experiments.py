@@ -95,7 +95,7 @@ def embedding_run(prior, task: str, seed: int, epochs: int, space: str | None = 
     """Algorithm 1 from the null embedding: each epoch's metrics and atoms, the final mixture
     weights (None for a free ``c``) and the condition ``c`` it hands to co-design."""
     emb = EmbeddingConfig(**embedding_config(task, seed, epochs, space, free_lr)["embedding"])
-    opt = EmbeddingOptimiser(prior, get_task(task), emb, prior.null, seed=seed)
+    opt = EmbeddingOptimiser(prior, get_task(task), emb, prior.null(), seed=seed)
     rows = [opt.step() for _ in range(epochs)]
     w = opt.embedding.weights()
     return {"means": [r["mean"] for r in rows], "maxes": [r["max"] for r in rows],
@@ -138,7 +138,7 @@ def codesign_run(prior, config: dict, c: torch.Tensor | None) -> dict:
     co-optimised controller, also the same design under the prescribed controller."""
     task = get_task(config["task"])
     cod = CodesignConfig(**config["codesign"])
-    conds = guidance_terms(prior, prior.null if c is None else c, config["guidance"],
+    conds = guidance_terms(prior, prior.null() if c is None else c, config["guidance"],
                            config["prompt"], config["prompt_guidance"] or 3.0,
                            config["prompt_t_min"] or 0)
     res = codesign_design(prior, task, conds, cod, config["seed"], config["sample_steps"])
@@ -157,7 +157,7 @@ def conditions_run(prior, task: str, n: int = 4, seed: int = 7) -> dict:
 
     names, caps = caption_atoms(getattr(prior, "corpus", 1), getattr(prior, "tokens", 0))
     out = {}
-    for name, e in zip(("null", *names), torch.cat([prior.null, caps]), strict=True):
+    for name, e in zip(("null", *names), torch.cat([prior.null(), caps]), strict=True):
         x = prior.sample(embedding=e[None], n=n, guidance=3.0, steps=32, seed=seed).clouds
         ext = x.max(1) - x.min(1)
         out[name] = {"metrics": score(x, get_task(task)).tolist(),
@@ -202,7 +202,7 @@ def textwindow_run(prior, task: str, c: torch.Tensor | None, seed: int, variant:
     from dbtool.prior.training.metrics import chamfer_to_family
 
     prompt, family = TEXT_PAIRS[task]
-    conds: list[tuple] = [(prior.null if c is None else c, 3.0)]
+    conds: list[tuple] = [(prior.null() if c is None else c, 3.0)]
     if variant != "none":
         w, t_min = variant.split("@")
         conds.append((prior.embed(prompt), float(w), int(t_min)))
