@@ -172,10 +172,33 @@ def test_per_token_conditioning_reads_the_tokens_and_ignores_the_padding():
         assert torch.allclose(m(x, t, c)[:, perm], m(x[:, perm], t, c), atol=1e-5)
         assert torch.isfinite(m(x, t, torch.zeros_like(c))).all()
     prior = Prior(m, bf16=False)
-    assert prior.tokens == 8 and torch.equal(prior.embed(["a spring"]), c[:1])
+    assert prior.tokens == 8  # batch padding moves token states by ~1e-6 on some builds
+    assert torch.allclose(prior.embed(["a spring"]), c[:1], atol=1e-5)
     with pytest.raises(ValueError, match="shape"):
         prior.sample(embedding=torch.randn(1, 384), steps=2, points=8)
     assert prior.sample("a spring", steps=2, points=8).clouds.shape == (1, 8, 3)
+
+
+def test_gradients_through_a_per_token_condition_are_finite_and_match_differences():
+    """Embedding optimisation differentiates the prediction w.r.t. the packed condition: at
+    the null condition and at a prompt's padded slots (weight 0) the gradient is finite, and
+    the derivative w.r.t. a padded slot's weight matches a finite difference."""
+    m = tiny_model(tokens=4).double()
+    x, t = torch.randn(1, 30, 3, dtype=torch.float64), torch.tensor([300])
+    prompt = text.encode_tokens(["a ball"], 4).double()  # [CLS] a ball [SEP]: no padding
+    prompt[0, -1] = 0.0  # the last slot's weight off, its state kept
+    g = torch.randn(1, 30, 3, dtype=torch.float64)
+    for cond in (torch.zeros_like(prompt), prompt):
+        c = cond.clone().requires_grad_(True)
+        (m(x, t, c) * g).sum().backward()
+        assert torch.isfinite(c.grad).all()
+    c = prompt.clone().requires_grad_(True)
+    (m(x, t, c) * g).sum().backward()
+    h, bumped = 1e-6, prompt.clone()
+    bumped[0, -1] = h
+    with torch.no_grad():
+        fd = float(((m(x, t, bumped) - m(x, t, prompt)) * g).sum()) / h
+    assert fd != 0.0 and abs(float(c.grad[0, -1]) - fd) <= 1e-3 * abs(fd)
 
 
 def test_sampler_is_deterministic_under_a_seed():

@@ -63,13 +63,15 @@ class Attention(nn.Module):
     def forward(self, x: torch.Tensor, ctx: torch.Tensor,
                 weight: torch.Tensor | None = None) -> torch.Tensor:
         """``weight`` (B, M) in [0, 1]: how much each context entry takes part (None: all
-        fully); attention logits get ``log(weight)``, so 0 removes an entry and a blend of two
-        conditions blends smoothly."""
+        fully); attention logits get ``log(weight + 1e-30)``, so 0 removes an entry (its share
+        is below float32 resolution), a blend of two conditions blends smoothly, and the
+        gradient w.r.t. a weight stays finite at 0 (``log(0)`` would give ``inf * 0``)."""
         b, n, w = x.shape
         m, h = ctx.shape[1], self.heads
         q = self.q(x).view(b, n, h, w // h).transpose(1, 2)
         k, v = self.kv(ctx).view(b, m, 2, h, w // h).permute(2, 0, 3, 1, 4)
-        bias = None if weight is None else torch.log(weight.clamp(0.0, 1.0))[:, None, None, :]
+        bias = None if weight is None else torch.log(weight.clamp(0.0, 1.0) + 1e-30)[:, None,
+                                                                                    None, :]
         if torch.is_grad_enabled():
             att = (q @ k.transpose(-1, -2)) * (w // h) ** -0.5
             y = (att if bias is None else att + bias).softmax(-1) @ v
