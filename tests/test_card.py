@@ -87,7 +87,12 @@ def test_version_3_card_has_tokens_scaling_and_the_shared_measure():
                   "version 3": {"per_family": {"ball": {"accuracy": 1.0},
                                                "worm": {"accuracy": 0.875}},
                                 "accuracy": 0.9375, "min_accuracy": 0.875}}}
+    assert "every step" not in card.render(meta, None, ev, None, shared=shared)  # unrecorded
+    shared["guidance"] = 3.0
+    shared["priors"]["version 1"]["guidance_interval"] = None
+    shared["priors"]["version 3"]["guidance_interval"] = [0, 400]
     text = card.render(meta, None, ev, None, scaling=scaling, shared=shared)
+    assert "version 1 at every step; version 3 at 0 <= t <= 400" in text
     assert text.startswith("# dbtool prior: model card (version 3)")
     assert "Corpus 3 is corpus 2 with" in text and "token states (up to 24 of them)" in text
     assert ", 24 token states) |" in text  # the training table names the conditioning

@@ -489,11 +489,14 @@ def test_shared_measure_scores_versions_against_the_same_references():
     assert ref.shape == (8, 64, 3) and sorted(lab.tolist()) == [0, 0, 0, 0, 1, 1, 1, 1]
     old, new = Prior(tiny_model(), bf16=False), Prior(tiny_model(1, tokens=4), bf16=False)
     old.corpus, new.corpus = 1, 3
+    new.guidance_interval = (0, 400)
     seen = []
     res = shared_measure({"v1": old, "v3": new}, ["ball", "star"], samples=2, steps=2,
                          per_family=2, parts=lambda name, f: seen.append(name) or f())
     assert res["corpora"] == [1, 3] and set(res["priors"]) == {"v1", "v3"}
     assert seen == ["shared/v1/ball", "shared/v1/star", "shared/v3/ball", "shared/v3/star"]
+    assert res["priors"]["v1"]["guidance_interval"] is None
+    assert res["priors"]["v3"]["guidance_interval"] == [0, 400]
     for r in res["priors"].values():
         assert r["per_family"]["ball"]["prompt"] == "a ball"
         assert r["accuracy"] == pytest.approx(np.mean([f["accuracy"]

@@ -101,6 +101,17 @@ def scaling_section(scaling: dict | None) -> list[str]:
     return out + [""]
 
 
+def _shared_guidance(shared: dict) -> str:
+    """The guidance each prior sampled with, where the measure recorded it."""
+    said = [(n, r["guidance_interval"]) for n, r in shared["priors"].items()
+            if "guidance_interval" in r]
+    if not said:
+        return ""
+    return f" Guidance {shared['guidance']:g}: " + "; ".join(
+        f"{n} at every step" if gi is None else f"{n} at {gi[0]} <= t <= {gi[1]}"
+        for n, gi in said) + " (each version's shipped setting)."
+
+
 def shared_section(shared: dict | None) -> list[str]:
     """This model and version 1 on the families both know, against the same references
     (:mod:`dbtool.prior.training.shared`)."""
@@ -111,7 +122,8 @@ def shared_section(shared: dict | None) -> list[str]:
            f"The {len(shared['families'])} families both versions know; each prompted with its "
            f"own family prompt, {shared['samples']} samples per family, a sample right when its "
            f"nearest reference among corpora {', '.join(map(str, shared['corpora']))}'s "
-           f"({shared['reference_per_family']} per family and corpus) is of that family.", "",
+           f"({shared['reference_per_family']} per family and corpus) is of that family."
+           + _shared_guidance(shared), "",
            "| family | " + " | ".join(names) + " |", "|---|" + "---:|" * len(names)]
     for fam in shared["families"]:
         out.append(f"| {fam} | " + " | ".join(

@@ -62,6 +62,8 @@ def shared_measure(priors: dict[str, Prior], families: list[str] | None = None,
             if log is not None:
                 log(f"{name:8s} {fam:10s} {per[fam]['accuracy']:.2f}")
         accs = [r["accuracy"] for r in per.values()]
+        gi = prior.guidance_interval
         out["priors"][name] = {"per_family": per, "accuracy": float(np.mean(accs)),
-                               "min_accuracy": float(np.min(accs))}
+                               "min_accuracy": float(np.min(accs)),
+                               "guidance_interval": list(gi) if gi else None}
     return out
