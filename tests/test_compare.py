@@ -104,9 +104,15 @@ def test_serial_smoke_comparison(serial_run):
         rec = json.loads((cell / "cell.json").read_text())
         assert rec["status"] == "done" and repr(float(rec["metric"])) == r["metric"]
         assert Design.load(cell / "design.npz").metrics == {r["task"]: float(r["metric"])}
-        last = json.loads((cell / "metrics.jsonl").read_text().splitlines()[-1])
-        assert last == {"phase": "final", "metric": float(r["metric"])}
-    for name in ("table.md", "bars.png", "robots.png"):
+        progress = [json.loads(line) for line in (cell / "metrics.jsonl").read_text()
+                    .splitlines()]
+        assert progress[-1] == {"phase": "final", "metric": float(r["metric"]),
+                                "units": float(r["budget_used"])}
+        spent = [row["units"] for row in progress]  # every row: the units spent by then
+        assert spent == sorted(spent) and spent[0] > 0
+        if r["method"] == "prior":  # one row per scored sample, one unit each
+            assert spent[:-1] == [float(k) for k in range(1, units)]
+    for name in ("table.md", "bars.png", "robots.png", "anytime.png", f"anytime-{TASK}.png"):
         assert (out / name).stat().st_size > 0
         assert f"{out / name}" in res.stdout
     table = (out / "table.md").read_text().splitlines()

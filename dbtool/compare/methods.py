@@ -119,9 +119,11 @@ def _prior_samples(task: Task, budget: Budget, seed: int, log) -> Outcome:
                              n_steps=budget.n_steps)
     n = max(1, budget.units - 1)
     clouds, _ = opt.sample(n, seed=seed * 100_003)
-    metrics = score(clouds, task, budget.n_steps)
-    for i, m in enumerate(metrics):
-        log(phase="sample", sample=i, metric=None if not np.isfinite(m) else float(m))
+    metrics = np.full(n, np.nan)
+    for i in range(n):  # scored one by one: each row's units are the samples scored so far
+        metrics[i] = score(clouds[i:i + 1], task, budget.n_steps)[0]
+        log(phase="sample", sample=i, metric=None if not np.isfinite(metrics[i])
+            else float(metrics[i]))
     i = _best_cloud(task, clouds, metrics)
     return _to_outcome(task, clouds[i], None, budget.n_steps,
                        {"samples": n, "best": i, "failed": int((~np.isfinite(metrics)).sum())})
