@@ -6,7 +6,7 @@
 #       extension: .py
 #       format_name: percent
 #       format_version: '1.3'
-#       jupytext_version: 1.19.6
+#       jupytext_version: 1.19.7
 #   kernelspec:
 #     display_name: Python 3
 #     language: python
@@ -28,6 +28,7 @@
 
 # %%
 import csv
+import json
 import os
 import tempfile
 import time
@@ -145,3 +146,20 @@ print(f"{len(over)} of {len(rows)} cells spent more than their budget"
       + (f": {', '.join(sorted({r['method'] for r in over}))}" if over else ""))
 assert result["done"] + result["failed"] == len(TASKS) * len(METHODS) * len(SEEDS)
 assert all(r["budget_used"] > 0 for r in rows)
+
+# %% [markdown]
+# ## Anytime curves
+#
+# Every progress row of a cell records the units spent when it was written, so the report also
+# draws, per task, the best metric each method had found against the units it had spent (mean
+# over seeds, min to max as a band): `anytime.png` and one `anytime-TASK.png` per task in the
+# comparison folder (`dbtool/compare/anytime.py`). On `smoke` the curves have a few points
+# each; on `standard` they show whether a method was still improving when its budget ran out.
+
+# %%
+display(Image(str(out / "anytime.png")))
+anytime = json.loads((out / "anytime.json").read_text())
+for task, per in anytime.items():
+    ends = {m: c["mean"][-1] for m, c in per.items()}
+    print(task, {TITLES[m]: None if v is None else round(v, 4) for m, v in ends.items()})
+assert anytime and set(anytime) <= set(TASKS)

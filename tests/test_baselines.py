@@ -106,6 +106,46 @@ def test_the_start_is_the_reference_body(name):
     assert np.array_equal(active, ref) and ref.sum() == 2030
 
 
+@pytest.mark.parametrize("name", NAMES)
+def test_a_seeded_start_moves_the_reference_body_a_little_and_differently_per_seed(name):
+    """With ``start_noise`` (the standard and paper budgets) every representation starts
+    from the reference body plus a smooth seeded field: the same seed gives the same start,
+    two seeds give different starts, most of the body stays (its boundary moves), the
+    actuator groups mostly keep their particles, and every field is in range."""
+    task = get_task("crawling")
+    ref = reference_robot(task, "box")
+    starts = [make(name, task, seed=s, start_noise=1.0).robot() for s in (0, 0, 1)]
+    assert np.array_equal(starts[0].occupancy, starts[1].occupancy)
+    assert not np.allclose(starts[0].occupancy, starts[2].occupancy)
+    assert not np.allclose(starts[0].stiffness, starts[2].stiffness)
+    for r in (starts[0], starts[2]):
+        kept = (r.active() == ref.active()).mean()
+        assert 0.8 <= kept < 1.0, kept  # moved, not destroyed
+        inside = ref.active() & r.active()
+        same_group = (r.actuators[inside].argmax(1) == ref.actuators[inside].argmax(1)).mean()
+        assert same_group > 0.8, same_group
+        assert np.all((r.occupancy >= 0) & (r.occupancy <= 1))
+        assert np.allclose(r.actuators.sum(1), 1.0)
+    assert np.array_equal(make(name, task, seed=1).robot().occupancy,
+                          make(name, task, seed=1, start_noise=0.0).robot().occupancy)
+
+
+def test_the_start_perturbation_is_smooth_and_unit_scaled():
+    from dbtool.baselines.features import start_perturbation
+
+    task = get_task("crawling")
+    pts, ws = task.design_points(), task.design_workspace()
+    f = start_perturbation(pts, ws, seed=3, channels=4)
+    assert f.shape == (len(pts), 4) and np.allclose(f, start_perturbation(pts, ws, 3, 4))
+    assert 0.5 < f.std() < 1.5
+    assert np.array_equal(start_perturbation(pts, ws, 3, 4, scale=0.0), np.zeros_like(f))
+    # neighbours (one lattice cell apart) are close: a field, not per-particle noise
+    order = np.lexsort(pts.T[::-1])
+    step = np.abs(np.diff(f[order], axis=0))[np.linalg.norm(np.diff(pts[order], axis=0),
+                                                             axis=1) < 1.5 * np.ptp(pts) / 10]
+    assert np.median(step) < 0.25 * f.std()
+
+
 def test_reference_fields_at_the_lattice_are_reference_robot():
     task = get_task("crawling")
     occ, acts = reference_fields(task)

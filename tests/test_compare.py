@@ -104,9 +104,15 @@ def test_serial_smoke_comparison(serial_run):
         rec = json.loads((cell / "cell.json").read_text())
         assert rec["status"] == "done" and repr(float(rec["metric"])) == r["metric"]
         assert Design.load(cell / "design.npz").metrics == {r["task"]: float(r["metric"])}
-        last = json.loads((cell / "metrics.jsonl").read_text().splitlines()[-1])
-        assert last == {"phase": "final", "metric": float(r["metric"])}
-    for name in ("table.md", "bars.png", "robots.png"):
+        progress = [json.loads(line) for line in (cell / "metrics.jsonl").read_text()
+                    .splitlines()]
+        assert progress[-1] == {"phase": "final", "metric": float(r["metric"]),
+                                "units": float(r["budget_used"])}
+        spent = [row["units"] for row in progress]  # every row: the units spent by then
+        assert spent == sorted(spent) and spent[0] > 0
+        if r["method"] == "prior":  # one row per scored sample, one unit each
+            assert spent[:-1] == [float(k) for k in range(1, units)]
+    for name in ("table.md", "bars.png", "robots.png", "anytime.png", f"anytime-{TASK}.png"):
         assert (out / name).stat().st_size > 0
         assert f"{out / name}" in res.stdout
     table = (out / "table.md").read_text().splitlines()
@@ -156,6 +162,8 @@ def test_a_method_that_does_not_read_the_seed_runs_once_per_task(serial_run, tmp
     from dbtool.compare.methods import seeded
 
     assert [m for m in METHODS if not seeded(m)] == ["particle", "voxel"]
+    assert [m for m in METHODS if not seeded(m, get_budget("quick"))] == ["particle", "voxel"]
+    assert all(seeded(m, get_budget("standard")) for m in METHODS)  # a seeded start
     task = get_task(TASK)
     for m in GRADIENT:
         a, b = make(m, task, seed=0), make(m, task, seed=3)
@@ -283,7 +291,7 @@ BAD = {
     "unknown task": (["--budget", "smoke", "--tasks", "walking", "--out", "new"], None,
                      "unknown task 'walking'"),
     "unknown budget": (["--budget", "huge", "--out", "new"], None,
-                       "unknown budget 'huge'; choose one of smoke, quick, paper"),
+                       "unknown budget 'huge'; choose one of smoke, quick, standard, paper"),
     "unknown executor": ([*ONE, "--executor", "nope", "--out", "new"], None,
                          "unknown executor 'nope'; choose one of serial, local, ray"),
     "resume without out": ([*ONE, "--resume"], None, "--resume needs --out"),
@@ -340,6 +348,7 @@ def test_space_separated_lists_reach_every_value(tmp_path):
 PLANS = {  # (epochs, samples per epoch, co-design samples, Langevin steps, planned units)
     "smoke": {t: (2, 1, 1, 1, 8) for t in TASKS},
     "quick": {t: (2, 5, 1, 1, 19) for t in TASKS},
+    "standard": {t: (4, 14, 1, 6, 100) for t in TASKS},  # 3 designs per epoch per epoch
     "paper": {"balancing": (20, 60, 4, 27, 1961), "landing": (20, 60, 4, 21, 1793),
               **{t: (20, 60, 4, 45, 2465) for t in ("crawling", "hurdling", "gripping", "box")}},
 }
@@ -353,7 +362,7 @@ def test_every_method_fits_the_budget(name):
     budget = get_budget(name)
     assert used(3, 2) == 3 + 2 * (GRAD_COST - 1) == 9.0
     n = gradient_iterations(budget.units)
-    assert n == {"smoke": 1, "quick": 4, "paper": 624}[name]
+    assert n == {"smoke": 1, "quick": 4, "standard": 24, "paper": 624}[name]
     assert used(n + 1, n) <= budget.units < used(n + 2, n + 1)  # all that fits, and no more
     for task in TASKS:
         plan = diffusebot_plan(task, budget)
@@ -364,15 +373,18 @@ def test_every_method_fits_the_budget(name):
         assert plan["planned_units"] <= budget.units
         emb, cod, _ = diffusebot_configs(task, budget)
         search = len(cod.search)  # forward episodes of each step's line search
-        assert search == {"smoke": 0, "quick": 3, "paper": 3}[name]
+        assert search == {"smoke": 0, "quick": 3, "standard": 3, "paper": 3}[name]
         assert plan["planned_units"] == (
             plan["epochs"] * plan["samples_per_epoch"] + 1
             + plan["codesign_samples"] * used(plan["langevin_steps"] * (1 + search) + 1,
                                               plan["langevin_steps"]))
         assert (emb.epochs, emb.samples_per_epoch, cod.samples, n_steps(cod)) == sizes[:4]
         assert emb.sample_steps == budget.sample_steps
-        if name != "paper":  # one stop: at t_min with the line search, else at t_max
+        if name in ("smoke", "quick"):  # one stop: at t_min with the line search, else t_max
             assert stops(cod) == [0 if search else TABLE5[task].t_max]
+        elif name == "standard":  # six stops spread over Table 5's [t_min, t_max]
+            st = stops(cod)
+            assert len(st) == 6 and st[0] == TABLE5[task].t_max and st[-1] == TABLE5[task].t_min
 
 
 def test_gradient_iterations_of_tiny_budgets():

@@ -16,6 +16,11 @@ DEFAULT_BODY = {"gripping": "finger"}  # the reference body a task's baseline st
 INIT_LOGIT = 2.0  # reference shape: inside -> sigmoid(2) = 0.88, outside -> 0.12
 ACTUATOR_LOGIT = 4.0  # reference groups: softmax weight 0.95 (4 groups), 0.98 (2) on its own
 N_FEATURES = 7
+# the seeded start (a budget's ``start_noise``): std of the smooth field added to the
+# occupancy logits, the softness and each actuator logit, per unit of start_noise
+START_STD = {"occupancy": 1.0, "softness": 0.3, "actuator": 1.0}
+START_MODES = 16  # random Fourier modes of the field
+START_FREQUENCY = np.pi  # their angular frequencies ~ N(0, pi^2) over coordinates in [-1, 1]
 
 
 def reference_shape(task: Task) -> str:
@@ -56,3 +61,33 @@ def input_features(points: np.ndarray, workspace) -> torch.Tensor:
 def normal_(shape: tuple[int, ...], std: float, gen: torch.Generator) -> torch.Tensor:
     """Seeded normal draws (float64), without touching the global RNG."""
     return torch.randn(shape, generator=gen, dtype=torch.float64) * std
+
+
+def start_perturbation(points: np.ndarray, workspace, seed: int, channels: int,
+                       scale: float = 1.0) -> np.ndarray:
+    """A smooth seeded random field, ``(N, channels)`` with unit standard deviation per channel
+    (times ``scale``; zeros when ``scale`` is 0): ``START_MODES`` random Fourier modes of the
+    coordinates normalised to [-1, 1] over ``workspace``, wavelengths around the workspace's
+    size. Seeds a gradient baseline's start (docs/method.md §7): a seed moves the boundary
+    and the actuator groups of the reference body by a few lattice cells, not particle by
+    particle."""
+    n = len(points)
+    if scale == 0.0:
+        return np.zeros((n, channels))
+    rng = np.random.default_rng([int(seed), 7_919])  # its own stream, whatever else reads seed
+    u = 2.0 * np.asarray(points, float) / np.asarray(workspace, float) - 1.0
+    freq = rng.normal(0.0, START_FREQUENCY, (channels, START_MODES, 3))
+    phase = rng.uniform(0.0, 2.0 * np.pi, (channels, START_MODES))
+    amp = rng.normal(0.0, 1.0, (channels, START_MODES))
+    field = np.einsum("ck,nck->nc", amp, np.cos(np.einsum("nd,ckd->nck", u, freq) + phase))
+    return scale * np.sqrt(2.0 / START_MODES) * field
+
+
+def start_offsets(points: np.ndarray, workspace, seed: int, groups: int, scale: float
+                  ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The seeded start's offsets at ``points``: occupancy logits (N,), softness (N,) and
+    actuator logits (N, groups), float64 (:data:`START_STD` times ``scale``)."""
+    f = start_perturbation(points, workspace, seed, 2 + groups, scale)
+    t = torch.as_tensor(f, dtype=torch.float64)
+    return (START_STD["occupancy"] * t[:, 0], START_STD["softness"] * t[:, 1],
+            START_STD["actuator"] * t[:, 2:])

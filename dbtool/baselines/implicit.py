@@ -40,10 +40,13 @@ class ImplicitRepresentation(Representation):
                  "and bias 0, added to the reference logits (occupancy +-2, softness 0, "
                  "actuator 4 on the reference group).")
 
-    def __init__(self, task: Task, seed: int = 0, points: np.ndarray | None = None) -> None:
-        super().__init__(task, seed, points)
+    def __init__(self, task: Task, seed: int = 0, points: np.ndarray | None = None,
+                 start_noise: float = 0.0) -> None:
+        super().__init__(task, seed, points, start_noise)
         occ, acts = reference_fields(task, self.points)
-        self.base_occupancy, self.base_actuators = reference_logits(occ, acts)
+        g, a = reference_logits(occ, acts)
+        dg, self.base_softness, da = self.start_offsets()
+        self.base_occupancy, self.base_actuators = g + dg, a + da
         self.inputs = input_features(self.points, self.workspace)
         gen = torch.Generator().manual_seed(seed)
         sizes = (N_FEATURES, *self.hidden, 2 + task.n_groups)
@@ -71,5 +74,5 @@ class ImplicitRepresentation(Representation):
     def fields(self) -> Fields:
         out = self.network()
         return Fields(torch.sigmoid(out[:, 0] + self.base_occupancy),
-                      softness_to_stiffness(out[:, 1]),
+                      softness_to_stiffness(out[:, 1] + self.base_softness),
                       actuator_weights(out[:, 2:] + self.base_actuators))

@@ -39,10 +39,10 @@ class ParticleRepresentation(Representation):
                  "elsewhere.")
 
     def __init__(self, task: Task, seed: int = 0, points: np.ndarray | None = None,
-                 robot: Robot | None = None) -> None:
+                 robot: Robot | None = None, start_noise: float = 0.0) -> None:
         """``robot`` (optional) starts from that robot's fields and lattice instead of the
         reference body; ``points`` is then ignored."""
-        super().__init__(task, seed, points if robot is None else robot.points)
+        super().__init__(task, seed, points if robot is None else robot.points, start_noise)
         if robot is None:
             occ, acts = reference_fields(task, self.points)
             stiff = np.full(len(self.points), DEFAULT_STIFFNESS)
@@ -52,6 +52,8 @@ class ParticleRepresentation(Representation):
         g, a = reference_logits(occ, acts)
         ratio = np.log(np.asarray(stiff, float) / DEFAULT_STIFFNESS) / LOG_STIFFNESS_RANGE
         s = torch.as_tensor(np.arctanh(np.clip(ratio, -1 + 1e-6, 1 - 1e-6)), dtype=torch.float64)
+        dg, ds, da = self.start_offsets()
+        g, s, a = g + dg, s + ds, a + da
         self.geometry = g.clone().requires_grad_(True)
         self.softness = s.clone().requires_grad_(True)
         self.actuators = a.clone().requires_grad_(True)

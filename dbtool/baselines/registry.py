@@ -20,10 +20,11 @@ REPRESENTATIONS: dict[str, type[Representation]] = {
 }
 
 
-def make(name: str, task: Task, seed: int = 0, points: np.ndarray | None = None
-         ) -> Representation:
-    """The representation ``name`` of ``task``, initialised at the reference body."""
+def make(name: str, task: Task, seed: int = 0, points: np.ndarray | None = None,
+         start_noise: float = 0.0) -> Representation:
+    """The representation ``name`` of ``task``, initialised at the reference body (with the
+    seeded perturbation of scale ``start_noise``, docs/method.md §7)."""
     if name not in REPRESENTATIONS:
         raise InputError(f"unknown representation {name!r}; choose "
                          f"{', '.join(REPRESENTATIONS)}")
-    return REPRESENTATIONS[name](task, seed=seed, points=points)
+    return REPRESENTATIONS[name](task, seed=seed, points=points, start_noise=start_noise)

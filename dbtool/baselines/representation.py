@@ -46,13 +46,28 @@ class Representation:
     # then gives the same design, and a comparison runs the method once per task
     seeded = True
 
-    def __init__(self, task: Task, seed: int = 0, points: np.ndarray | None = None) -> None:
+    def __init__(self, task: Task, seed: int = 0, points: np.ndarray | None = None,
+                 start_noise: float = 0.0) -> None:
+        """``start_noise`` > 0 adds a smooth field drawn from ``seed`` to the start's logits
+        (:func:`dbtool.baselines.features.start_offsets`), so that every representation's
+        seeds start from different bodies near the reference."""
         self.task = task
         self.seed = seed
+        self.start_noise = float(start_noise)
         self.points = task.design_points() if points is None else np.asarray(points, float)
         self.workspace = np.asarray(task.design_workspace(), float)
         g = task.n_groups
         self.directions = np.tile(task.direction, (g, 1)).reshape(g, 3)
+
+    def start_offsets(self, points: np.ndarray | None = None
+                      ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The seeded start's offsets at ``points`` (default: the design lattice): zeros
+        unless ``start_noise`` > 0."""
+        from dbtool.baselines.features import start_offsets
+
+        pts = self.points if points is None else points
+        return start_offsets(pts, self.workspace, self.seed, self.task.n_groups,
+                             self.start_noise)
 
     def parameters(self) -> list[torch.Tensor]:
         raise NotImplementedError

@@ -76,8 +76,9 @@ class VoxelRepresentation(Representation):
                  "actuator logits 4 on the reference group of the design particle nearest to "
                  "the voxel centre.")
 
-    def __init__(self, task: Task, seed: int = 0, points: np.ndarray | None = None) -> None:
-        super().__init__(task, seed, points)
+    def __init__(self, task: Task, seed: int = 0, points: np.ndarray | None = None,
+                 start_noise: float = 0.0) -> None:
+        super().__init__(task, seed, points, start_noise)
         n, g = RESOLUTION, task.n_groups
         centres = voxel_centres(self.workspace, n)
         occ = shape_occupancy(reference_shape(task), centres, self.workspace)
@@ -90,9 +91,10 @@ class VoxelRepresentation(Representation):
         ref_occ, _ = reference_fields(task, self.points)
         logits = fit_logits(self.index.numpy(), self.weight.numpy(),
                             INIT_LOGIT * (2.0 * ref_occ - 1.0), INIT_LOGIT * (2.0 * occ - 1.0))
-        self.occupancy = torch.tensor(logits).reshape(grid)
-        self.softness = torch.zeros(grid, dtype=torch.float64)
-        self.actuators = torch.tensor(ACTUATOR_LOGIT * acts).reshape(grid + (g,))
+        dg, ds, da = self.start_offsets(centres)  # the seeded start, read at the voxels
+        self.occupancy = (torch.tensor(logits) + dg).reshape(grid)
+        self.softness = ds.reshape(grid).clone()
+        self.actuators = (torch.tensor(ACTUATOR_LOGIT * acts) + da).reshape(grid + (g,))
         for p in self.parameters():
             p.requires_grad_(True)
 

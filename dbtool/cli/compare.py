@@ -36,7 +36,7 @@ def compare_command(
     methods: list[str] = typer.Option(None, "--methods", help="particle, voxel, implicit, "
                                       "cppn, prior, diffusebot or all (default: all)"),
     seeds: list[int] = typer.Option(None, "--seeds", help="seeds (default: 0)"),
-    budget: str = typer.Option(None, help="smoke, quick or paper (default quick)"),
+    budget: str = typer.Option(None, help="smoke, quick, standard or paper (default quick)"),
     executor: str = typer.Option("serial", help="serial, local (processes here) or ray"),
     workers: int = typer.Option(2, help="worker processes (local) or CPUs of a private Ray "
                                 "instance"),

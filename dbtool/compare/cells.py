@@ -1,7 +1,8 @@
 """One cell of the comparison (method x task x seed) in its own folder (docs/results.md)::
 
     cells/METHOD-TASK-sSEED/
-        metrics.jsonl   progress rows of the method (iterations, epochs, samples)
+        metrics.jsonl   progress rows of the method (iterations, epochs, samples), each with
+                        ``units``: the simulator units spent when it was written
         design.npz      the final design (robot, controller, metric)
         montage.png     its final episode
         cell.json       status, metric, budget used, wall time, worker, commit (written last)
@@ -84,22 +85,24 @@ def run_cell(spec: CellSpec) -> dict:
     for stale in (CELL_FILE, "metrics.jsonl"):
         (folder / stale).unlink(missing_ok=True)
     rows: list[dict] = []
+    from dbtool.compare.budget import get_budget, used
 
-    def log(**row) -> None:
+    before = dict(simulator.EPISODES)
+
+    def log(**row) -> None:  # each row with the units spent so far (the anytime curves)
+        row["units"] = used(simulator.EPISODES["forward"] - before["forward"],
+                            simulator.EPISODES["backward"] - before["backward"])
         rows.append(row)
         atomic_write_text(folder / "metrics.jsonl",
                           "".join(json.dumps(r, default=float) + "\n" for r in rows))
 
     start = time.perf_counter()
-    before = dict(simulator.EPISODES)
     record = {**asdict(spec), "worker": f"{socket.gethostname()}:{os.getpid()}"}
     try:
         record.update(status="done", **_work(spec, log))
     except Exception as exc:  # noqa: BLE001 - a failed cell is reported, the rest go on
         record.update(status="failed", error=f"{exc.__class__.__name__}: {exc}"[:300],
                       traceback=traceback.format_exc()[-2000:])
-    from dbtool.compare.budget import get_budget, used
-
     fwd = simulator.EPISODES["forward"] - before["forward"]
     bwd = simulator.EPISODES["backward"] - before["backward"]
     record.update(forward_episodes=fwd, gradient_episodes=bwd, budget_used=used(fwd, bwd),

@@ -52,14 +52,15 @@ class Outcome:
     info: dict | None = None
 
 
-def seeded(method: str) -> bool:
+def seeded(method: str, budget: Budget | None = None) -> bool:
     """Whether ``method``'s design depends on the seed: false for the gradient baselines that
-    start from the task's reference body without a perturbation (particle, voxel), whose
-    gradient loop is deterministic."""
+    start from the task's reference body without a perturbation (particle, voxel, unless
+    ``budget`` seeds their start), whose gradient loop is deterministic."""
     if method in GRADIENT:
         from dbtool.baselines.registry import REPRESENTATIONS
 
-        return REPRESENTATIONS[method].seeded
+        return REPRESENTATIONS[method].seeded or (budget is not None
+                                                  and budget.start_noise > 0)
     return True
 
 
@@ -80,7 +81,7 @@ def _gradient(method: str, task: Task, budget: Budget, seed: int, log) -> Outcom
     from dbtool.baselines.registry import make
     from dbtool.baselines.representation import optimise
 
-    rep = make(method, task, seed=seed)
+    rep = make(method, task, seed=seed, start_noise=budget.start_noise)
     n = gradient_iterations(budget.units)
     res = optimise(rep, n, n_steps=budget.n_steps,
                    callback=lambda k, v, _r: log(phase="gradient", iteration=k, metric=v))
@@ -118,9 +119,11 @@ def _prior_samples(task: Task, budget: Budget, seed: int, log) -> Outcome:
                              n_steps=budget.n_steps)
     n = max(1, budget.units - 1)
     clouds, _ = opt.sample(n, seed=seed * 100_003)
-    metrics = score(clouds, task, budget.n_steps)
-    for i, m in enumerate(metrics):
-        log(phase="sample", sample=i, metric=None if not np.isfinite(m) else float(m))
+    metrics = np.full(n, np.nan)
+    for i in range(n):  # scored one by one: each row's units are the samples scored so far
+        metrics[i] = score(clouds[i:i + 1], task, budget.n_steps)[0]
+        log(phase="sample", sample=i, metric=None if not np.isfinite(metrics[i])
+            else float(metrics[i]))
     i = _best_cloud(task, clouds, metrics)
     return _to_outcome(task, clouds[i], None, budget.n_steps,
                        {"samples": n, "best": i, "failed": int((~np.isfinite(metrics)).sum())})
@@ -130,7 +133,8 @@ def diffusebot_plan(task: str, budget: Budget) -> dict:
     """How DiffuseBot spends ``budget.units - 1`` units: the paper's Tables 4-5 when they fit,
     otherwise half on co-design (one sample of ``s`` Langevin steps, each a gradient episode
     and the line search's forward episodes (:func:`step_units`), plus its scoring episode) and
-    the rest on embedding epochs of ``S`` designs."""
+    the rest on embedding epochs of ``S`` designs, about three times as many designs per epoch
+    as epochs (Table 4's 20 x 60)."""
     from dbtool.codesign.config import TABLE4, TABLE5, n_steps, step_units
 
     free = budget.units - 1
@@ -153,7 +157,9 @@ def diffusebot_plan(task: str, budget: Budget) -> dict:
         raise InputError(f"a budget of {budget.units} units is too small for DiffuseBot: it "
                          f"needs {int(cd) + 3} (two embedding epochs, one Langevin step, the "
                          "final evaluation)")
-    epochs = int(np.clip(emb_units // 60, 2, 20))
+    # Table 4 spends its designs as 20 epochs of 60 (3 designs per epoch per epoch); keep
+    # that shape: e epochs of 3e designs, at least 2 epochs
+    epochs = int(np.clip(round(np.sqrt(emb_units / 3)), 2, 20))
     per_epoch = max(1, emb_units // epochs)
     return {"preset": "quick", "epochs": epochs, "samples_per_epoch": per_epoch,
             "codesign_samples": 1, "langevin_steps": steps, "line_search": search,

@@ -313,14 +313,18 @@ def robot_grid(out_dir: str | Path, rows: list[dict], path: str | Path,
 
 # ---------------------------------------------------------------------------------- report
 def write_report(out_dir: str | Path) -> dict[str, Path]:
-    """Read ``out_dir/results.csv``; write ``table.md``, ``bars.png`` and ``robots.png`` there."""
+    """Read ``out_dir/results.csv``; write ``table.md``, ``bars.png``, ``robots.png`` and the
+    anytime curves (:func:`dbtool.compare.anytime.write_anytime`) there."""
     out_dir = Path(out_dir)
     csv_path = out_dir / "results.csv"
     rows = read_results(csv_path)
     if not rows:
         raise InputError(f"{csv_path} has no cells to report")
+    from dbtool.compare.anytime import write_anytime
+
     return {
         "table": atomic_write_text(out_dir / "table.md", table_markdown(rows)),
         "bars": bar_chart(rows, out_dir / "bars.png"),
         "robots": robot_grid(out_dir, rows, out_dir / "robots.png"),
+        **write_anytime(out_dir),
     }

@@ -173,15 +173,16 @@ def compare(cfg: CompareConfig, out: str | Path, executor: str = "serial", worke
                       meta.get("arch", "cpu"), tag) for m, t, s in meta["cells"]]
     finished = {sp.name for sp in specs
                 if (read_cell(sp.folder) or {}).get("status") == "done"}
+    budget = get_budget(meta["budget"])
     source: dict[tuple[str, str], CellSpec] = {}  # the cell a seedless method's others copy
     for sp in specs:
-        if not seeded(sp.method) and sp.name in finished:
+        if not seeded(sp.method, budget) and sp.name in finished:
             source.setdefault((sp.method, sp.task), sp)
     todo, copies = [], []
     for sp in specs:
         if sp.name in finished:
             continue
-        if seeded(sp.method):
+        if seeded(sp.method, budget):
             todo.append(sp)
         elif (sp.method, sp.task) in source:
             copies.append(sp)
