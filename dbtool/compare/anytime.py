@@ -26,6 +26,7 @@ import numpy as np  # noqa: E402
 
 from dbtool.atomic import atomic_write_text  # noqa: E402
 from dbtool.compare.budget import GRAD_COST  # noqa: E402
+from dbtool.compare.labels import grid_shape, method_name, ordered, task_title  # noqa: E402
 from dbtool.viz.clouds import save_figure  # noqa: E402
 
 METRIC_OF = {"embedding": "max"}  # the field a phase's row reports its best design in
@@ -122,7 +123,6 @@ def _list(a: np.ndarray) -> list[float | None]:
 
 
 def _panel(ax, data: dict, title: str, methods_order) -> None:
-    from dbtool.compare.report import method_name
 
     colours = plt.get_cmap("tab10").colors
     for i, m in enumerate(methods_order):
@@ -149,7 +149,6 @@ def write_anytime(out_dir: str | Path, dpi: int = 100) -> dict[str, Path]:
     """``anytime.json``, one ``anytime-TASK.png`` per task and the summary ``anytime.png`` (all
     tasks side by side) in ``out_dir``; nothing when no cell has progress rows."""
     from dbtool.compare.methods import METHODS
-    from dbtool.compare.report import _grid_shape, _ordered, task_title
     from dbtool.sim.task_names import NAMES as TASKS
 
     out_dir = Path(out_dir)
@@ -158,8 +157,8 @@ def write_anytime(out_dir: str | Path, dpi: int = 100) -> dict[str, Path]:
         return {}
     paths = {"anytime_json": atomic_write_text(out_dir / "anytime.json",
                                                json.dumps(data, indent=1))}
-    tasks = _ordered(set(data), TASKS)
-    methods = _ordered({m for d in data.values() for m in d}, METHODS)
+    tasks = ordered(set(data), TASKS)
+    methods = ordered({m for d in data.values() for m in d}, METHODS)
     note = "mean over seeds (line), min to max (band); (n) = seeds"
     for t in tasks:
         fig, ax = plt.subplots(figsize=(5.0, 3.4))
@@ -168,7 +167,7 @@ def write_anytime(out_dir: str | Path, dpi: int = 100) -> dict[str, Path]:
         fig.suptitle(note, fontsize=8)
         fig.tight_layout()
         paths[f"anytime_{t}"] = save_figure(fig, out_dir / f"anytime-{t}.png", dpi)
-    nr, nc = _grid_shape(len(tasks))
+    nr, nc = grid_shape(len(tasks))
     fig, axes = plt.subplots(nr, nc, figsize=(4.0 * nc, 3.1 * nr), squeeze=False)
     for k, t in enumerate(tasks):
         _panel(axes.flat[k], data[t], task_title(t), methods)

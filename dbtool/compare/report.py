@@ -22,6 +22,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from dbtool.atomic import atomic_write_text  # noqa: E402
+from dbtool.compare.labels import grid_shape, method_name, ordered, task_title  # noqa: E402
 from dbtool.compare.methods import TITLES  # noqa: E402
 from dbtool.design import Design, DesignFileError  # noqa: E402
 from dbtool.errors import InputError, MissingFileError
@@ -94,11 +95,6 @@ def read_results(path: str | Path) -> list[dict]:
     return rows
 
 
-def _ordered(names: set[str], order) -> list[str]:
-    """``names`` in the canonical ``order``, then any others sorted."""
-    return [n for n in order if n in names] + sorted(names - set(order))
-
-
 def _cells(rows: list[dict]) -> dict[tuple[str, str, int], dict]:
     """Rows by (method, task, seed); a repeated cell keeps its last row."""
     return {(r["method"], r["task"], r["seed"]): r for r in rows}
@@ -116,8 +112,8 @@ def summarise(rows: list[dict]) -> dict:
     ``methods`` and ``tasks`` (table order), ``mean_rank`` per method (None without any rank),
     ``seeds`` (distinct seed counts per cell) and ``budgets`` (distinct ``budget_units``)."""
     cells = _cells(rows)
-    methods = _ordered({m for m, _, _ in cells}, TITLES)
-    tasks = _ordered({t for _, t, _ in cells}, TASKS)
+    methods = ordered({m for m, _, _ in cells}, TITLES)
+    tasks = ordered({t for _, t, _ in cells}, TASKS)
     out: dict[tuple[str, str], dict] = {}
     for m in methods:
         for t in tasks:
@@ -144,17 +140,6 @@ def summarise(rows: list[dict]) -> dict:
                       if math.isfinite(r["budget_units"])})
     return {"methods": methods, "tasks": tasks, "cells": out, "mean_rank": mean_rank,
             "seeds": seeds, "budgets": budgets}
-
-
-def method_name(method: str) -> str:
-    return TITLES.get(method, method)
-
-
-def task_title(task: str) -> str:
-    try:
-        return get_task(task).title or task
-    except ValueError:
-        return task
 
 
 def _g(x: float) -> str:
@@ -200,11 +185,6 @@ def table_markdown(rows: list[dict]) -> str:
 
 
 # ---------------------------------------------------------------------------------- figures
-def _grid_shape(n: int, cols: int = 3) -> tuple[int, int]:
-    cols = max(1, min(n, cols))
-    return -(-n // cols), cols
-
-
 def bar_chart(rows: list[dict], path: str | Path, dpi: int = 100) -> Path:
     """One panel per task: a bar per method at its mean with sd error bars, each seed's value
     as a dot; saved atomically as PNG."""
@@ -212,7 +192,7 @@ def bar_chart(rows: list[dict], path: str | Path, dpi: int = 100) -> Path:
     methods, tasks, cells = s["methods"], s["tasks"], s["cells"]
     if not tasks:
         raise InputError("no cells to plot")
-    nr, nc = _grid_shape(len(tasks))
+    nr, nc = grid_shape(len(tasks))
     fig, axes = plt.subplots(nr, nc, figsize=(3.6 * nc, 3.2 * nr), squeeze=False)
     colours = plt.get_cmap("tab10").colors
     x = np.arange(len(methods))
