@@ -8,13 +8,14 @@
   comparison's per-cell setting). The ratio gradient / forward, per task and its mean, stands
   next to ``GRAD_COST``, the constant the budget charges a gradient episode
   (``dbtool/compare/budget.py``). Runs in this process.
-* ``throughput``: ``dbtool compare --budget smoke --tasks crawling --tasks gripping --methods
-  all --seeds 0`` (12 cells) as a CLI subprocess into a fresh temporary folder with
-  ``--executor serial``, ``local --workers 2`` and ``ray --workers 2``: wall time of the whole
-  subprocess (start-up, Taichi JIT from the offline cache, prior load, Ray start included),
-  cells per hour (finished cells / wall), the sum of the cells' own ``wall_s`` from
-  ``results.csv``, and whether the three ``results.csv`` agree on every cell's status, metric
-  and budget columns.
+* ``throughput``: ``dbtool compare --budget BUDGET`` on one set of cells (default: the smoke
+  budget, crawling and gripping, all methods, seed 0: 12 cells) as a CLI subprocess into a
+  fresh temporary folder with each executor of ``--executors`` (default ``serial``,
+  ``local-1``, ``local-2`` and ``ray-2``: the serial loop, the local process pool with 1 and 2
+  workers, a private Ray cluster with 2 workers): wall time of the whole subprocess (start-up,
+  Taichi JIT from the offline cache, prior load, Ray start included), cells per hour (finished
+  cells / wall), the sum of the cells' own ``wall_s`` from ``results.csv``, and whether the
+  ``results.csv`` agree on every cell's status, metric and budget columns.
 
 Prints two markdown tables and writes ``benchmarks/results/compare.json`` (``--quick``:
 ``compare-quick.json``: grad cost of crawling only at 20 steps, throughput of the 2 cells
@@ -23,6 +24,8 @@ particle and prior on crawling).
     python benchmarks/compare.py                  # full run -> results/compare.json
     python benchmarks/compare.py --quick          # a few minutes -> results/compare-quick.json
     python benchmarks/compare.py --parts grad_cost --repeats 3 --out /tmp/compare.json
+    python benchmarks/compare.py --parts throughput --budget standard --tasks landing crawling \
+        --methods prior --out benchmarks/results/compare-throughput-standard.json
 """
 
 from __future__ import annotations
@@ -48,7 +51,9 @@ from dbtool.sim.tasks import TASKS  # noqa: E402
 
 DEFAULT = ROOT / "benchmarks" / "results" / "compare.json"
 PARTS = ("grad_cost", "throughput")
-EXECUTORS = {"serial": [], "local": ["--workers", "2"], "ray": ["--workers", "2"]}
+# name -> (executor, its options)
+EXECUTORS = {"serial": ("serial", []), "local-1": ("local", ["--workers", "1"]),
+             "local-2": ("local", ["--workers", "2"]), "ray-2": ("ray", ["--workers", "2"])}
 FULL = {"tasks": ["crawling", "gripping"], "methods": ["all"]}
 QUICK = {"tasks": ["crawling"], "methods": ["particle", "prior"]}
 # columns of results.csv that must not depend on where a cell ran
@@ -93,8 +98,10 @@ def grad_cost(tasks: list[str], steps: int, repeats: int, threads: int) -> list[
 def compare_args(cells: dict, executor: str, out: Path) -> list[str]:
     """The CLI arguments (typer takes a list option once per value)."""
     rep = [a for opt in ("tasks", "methods") for v in cells[opt] for a in (f"--{opt}", v)]
-    return ["compare", "--budget", "smoke", *rep, "--seeds", "0", "--executor", executor,
-            *EXECUTORS[executor], "--out", str(out)]
+    seeds = [str(s) for s in cells.get("seeds", [0])]
+    kind, options = EXECUTORS[executor]
+    return ["compare", "--budget", cells.get("budget", "smoke"), *rep, "--seeds", *seeds,
+            "--executor", kind, *options, "--out", str(out)]
 
 
 def read_rows(path: Path) -> list[dict]:
@@ -147,12 +154,12 @@ def differences(runs: list[dict]) -> list[dict]:
     return diff
 
 
-def throughput(cells: dict, keep: Path | None) -> dict:
+def throughput(cells: dict, executors: list[str], keep: Path | None) -> dict:
     from dbtool.compare.methods import METHODS
 
     methods = list(METHODS) if cells["methods"] == ["all"] else cells["methods"]
-    n_cells = len(methods) * len(cells["tasks"])
-    runs = [run_executor(cells, ex, n_cells, keep) for ex in EXECUTORS]
+    n_cells = len(methods) * len(cells["tasks"]) * len(cells.get("seeds", [0]))
+    runs = [run_executor(cells, ex, n_cells, keep) for ex in executors]
     diff = differences(runs)
     complete = all(r["done"] == n_cells for r in runs)
     return {"cells": n_cells, "runs": runs, "identical": not diff and complete,
@@ -173,12 +180,13 @@ def grad_table(rows: list[dict], steps: int, threads: int) -> str:
 
 
 def throughput_table(res: dict) -> str:
-    lines = [f"dbtool compare --budget smoke, {res['cells']} cells; results identical across "
-             f"executors: {str(res['identical']).lower()}", "",
+    lines = [f"dbtool compare --budget {res.get('budget', 'smoke')}, {res['cells']} cells; results "
+             f"identical across executors: {str(res['identical']).lower()}", "",
              "| executor | rc | done | wall (s) | cells/h | sum of cell wall_s (s) |",
              "| --- | ---: | ---: | ---: | ---: | ---: |"]
     for r in res["runs"]:
-        name = r["executor"] + (" --workers 2" if EXECUTORS[r["executor"]] else "")
+        kind, options = EXECUTORS.get(r["executor"], (r["executor"], []))
+        name = " ".join([kind, *options])
         lines.append(f"| {name} | {r['returncode']} | {r['done']}/{r['cells']} | "
                      f"{r['wall_s']:.1f} | {r['cells_per_hour']:.1f} | "
                      f"{r['cell_wall_s_sum']:.1f} |")
@@ -197,6 +205,11 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--threads", type=int, default=1, help="Taichi and torch threads of the "
                     "grad-cost episodes (the comparison's default per cell)")
+    ap.add_argument("--budget", default="smoke", help="the cells' budget (throughput)")
+    ap.add_argument("--tasks", nargs="+", default=None, help="throughput cells' tasks")
+    ap.add_argument("--methods", nargs="+", default=None, help="throughput cells' methods")
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0], help="throughput cells' seeds")
+    ap.add_argument("--executors", nargs="+", choices=list(EXECUTORS), default=list(EXECUTORS))
     ap.add_argument("--keep", type=Path, default=None,
                     help="copy each executor's comparison folder to KEEP/EXECUTOR")
     ap.add_argument("--out", type=Path, default=None)
@@ -205,7 +218,11 @@ def main() -> None:
         ap.error("--repeats and --threads must be at least 1")
     steps = args.steps or (20 if args.quick else 100)
     tasks = ["crawling"] if args.quick else list(TASKS)
-    cells = QUICK if args.quick else FULL
+    cells = dict(QUICK if args.quick else FULL, budget=args.budget, seeds=args.seeds)
+    if args.tasks:
+        cells["tasks"] = args.tasks
+    if args.methods:
+        cells["methods"] = args.methods
     config = {"quick": args.quick, "parts": args.parts, "grad_cost_const": GRAD_COST}
     result: dict = {"quick": args.quick}
     if "grad_cost" in args.parts:
@@ -219,10 +236,11 @@ def main() -> None:
                                "mean_ratio": statistics.mean(r["ratio"] for r in rows),
                                "tasks": rows}
     if "throughput" in args.parts:
-        config["throughput"] = {"budget": "smoke", **cells, "seeds": [0],
-                                "executors": EXECUTORS}
-        print(f"throughput: {len(EXECUTORS)} executors", flush=True)
-        result["throughput"] = throughput(cells, args.keep)
+        config["throughput"] = {**cells, "executors": {e: EXECUTORS[e]
+                                                        for e in args.executors}}
+        print(f"throughput: {len(args.executors)} executors", flush=True)
+        result["throughput"] = {"budget": args.budget,
+                                **throughput(cells, args.executors, args.keep)}
     if "grad_cost" in result:
         g = result["grad_cost"]
         print("\n" + grad_table(g["tasks"], g["steps"], g["threads"]))
