@@ -12,13 +12,20 @@ the total. Peak memory is the process's maximum resident set size. Every simulat
 also recorded (forward without or with gradients, backward: particles stepped, substeps,
 seconds), which says where the simulation stage's time goes.
 
+Each checkpoint the run writes (after every embedding epoch and every Langevin stop) is
+timed, which gives the wall time per epoch and per stop; for a run cut short (``--epochs``,
+``--stops``) the time of the preset's full run is computed from them (labelled so):
+``epochs x epoch + samples x stops x stop``, where the first epoch (sampling, scoring, the
+predictor's first training) stands for every epoch.
+
 Prints a markdown table and writes ``benchmarks/results/design.json`` (``design-quick.json``
-with ``--quick``).
+with ``--quick``, ``design-paper.json`` with ``--preset paper``).
 
 Usage::
 
     python benchmarks/design.py                 # gripping, quick preset (~10 minutes)
     python benchmarks/design.py --quick         # smoke test: 1 epoch, 1 sample, 10 steps
+    python benchmarks/design.py --preset paper --epochs 1 --stops 1   # Tables 4-5 as published
 """
 
 from __future__ import annotations
@@ -48,7 +55,7 @@ STAGES = [
     ("simulation", "dbtool.sim.rollout", "simulate"),
     ("upsampling", "dbtool.prior.sampling.pipeline", "Prior.upsample"),
     ("figures", "dbtool.viz.render", "montage"),
-    ("figures", "dbtool.codesign.design_run", "performance_figure"),
+    ("figures", "dbtool.codesign.run_figures", "performance_figure"),
 ]
 ORDER = ["base model", "embedding training", "robotizing", "simulation", "upsampling",
          "figures"]
@@ -134,11 +141,59 @@ class EpisodeLog:
         return out
 
 
+class CheckpointClock:
+    """The time of every checkpoint the run writes, with what it had finished then (epochs,
+    co-designed samples, stops of the unfinished sample)."""
+
+    def __init__(self) -> None:
+        self.t0 = 0.0
+        self.marks: list[tuple[float, int, int, int]] = []
+
+    def start(self, t0: float) -> None:
+        self.t0 = t0
+
+    def install(self) -> None:
+        from dbtool.codesign.design_run import DesignRun
+
+        real = DesignRun.checkpoint
+
+        def timed(run):
+            real(run)
+            s = run.state
+            self.marks.append((time.perf_counter() - self.t0, s.epoch, len(s.samples),
+                               0 if s.partial is None else len(s.partial.trajectory)))
+        DesignRun.checkpoint = functools.wraps(real)(timed)
+
+    def units(self, run) -> dict:
+        """Seconds per epoch, per Langevin stop and per sample's final scoring (the gaps
+        between checkpoints), and the preset's full run computed from their means."""
+        from dbtool.codesign.config import preset
+        from dbtool.codesign.langevin import stops
+
+        gaps: dict[str, list[float]] = {"epoch_s": [], "stop_s": [], "sample_end_s": []}
+        last = 0.0
+        for t, _, samples, n_stops in self.marks:
+            kind = "stop_s" if n_stops else "sample_end_s" if samples else "epoch_s"
+            gaps[kind].append(round(t - last, 1))
+            last = t
+        emb, cod = preset(run.settings.preset, run.settings.task)
+        samples = run.settings.samples or cod.samples
+        full = {"epochs": emb.epochs, "samples": samples, "stops_per_sample": len(stops(cod))}
+        mean = {k: float(np.mean(v)) if v else 0.0 for k, v in gaps.items()}
+        return {**gaps, "full_run": full, "full_run_computed_s": full["epochs"] * mean["epoch_s"]
+                + samples * (full["stops_per_sample"] * mean["stop_s"] + mean["sample_end_s"])}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--task", default="gripping")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--preset", default="quick", choices=["quick", "paper"])
+    ap.add_argument("--epochs", type=int, default=None, help="embedding epochs (default: the "
+                    "preset's)")
+    ap.add_argument("--stops", type=int, default=None, help="pause after this many Langevin "
+                    "stops of co-design (default: run to the end)")
     ap.add_argument("--out", type=Path)
     args = ap.parse_args()
 
@@ -152,25 +207,38 @@ def main() -> None:
     prior = Prior.load()
     load_s = time.perf_counter() - t0
     kw = dict(epochs=1, samples=1, n_steps=10) if args.quick else {}
-    settings = Settings(args.task, "quick", args.seed, **kw)
+    if args.epochs is not None:
+        kw["epochs"] = args.epochs
+    settings = Settings(args.task, args.preset, args.seed, **kw)
     clock = StageClock()
     clock.install()
     episodes = EpisodeLog()
     episodes.install()
+    marks = CheckpointClock()
+    marks.install()
     with tempfile.TemporaryDirectory() as tmp:
         run = DesignRun(Path(tmp) / "run", settings, prior)
         config = run.config()
         run.start(runtime.device())
         t0 = time.perf_counter()
-        design = run.run(show_progress=False)
+        marks.start(t0)
+        design = run.run(show_progress=False, pause_after_stops=args.stops)
         total = time.perf_counter() - t0
     peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     rows = [(k, clock.seconds.get(k, 0.0), clock.calls.get(k, 0)) for k in ORDER]
     rows.append(("other", total - sum(clock.seconds.values()), 0))
-    print(f"\n`dbtool design {args.task} --preset quick` (seed {args.seed}"
-          f"{', smoke sizes' if args.quick else ''}): {total:.0f} s, peak RSS "
-          f"{peak_mib:.0f} MiB, prior load {load_s:.1f} s, final metric "
-          f"{design.metrics[args.task]:.5f}\n")
+    final = None if design is None else design.metrics[args.task]
+    units = marks.units(run)
+    cut = (", smoke sizes" if args.quick else "") + \
+        (f", {args.epochs} epoch(s)" if args.epochs else "") + \
+        (f", paused after {args.stops} stop(s)" if args.stops else "")
+    print(f"\n`dbtool design {args.task} --preset {args.preset}` (seed {args.seed}{cut}): "
+          f"{total:.0f} s, "
+          f"peak RSS {peak_mib:.0f} MiB, prior load {load_s:.1f} s, final metric "
+          f"{'- (paused)' if final is None else f'{final:.5f}'}\n")
+    print(f"per epoch {units['epoch_s']} s; per Langevin stop {units['stop_s']} s; the "
+          f"preset's full run computed: {units['full_run_computed_s'] / 3600:.2f} h "
+          f"({units['full_run']})\n")
     print("| stage | calls | seconds | share |")
     print("| --- | ---: | ---: | ---: |")
     for k, v, n in rows:
@@ -181,15 +249,18 @@ def main() -> None:
     for r in passes:
         print(f"| {r['kind']} | {r['passes']} | {r['seconds']:.1f} | "
               f"{r['mean_particles']:.0f} | {r['particle_substeps_per_s'] / 1e6:.2f} |")
+    default = Path(__file__).parent / "results" / (
+        "design.json" if args.preset == "quick" else f"design-{args.preset}.json")
     write_result({"task": args.task, "seed": args.seed, "quick": args.quick,
+                  "preset": args.preset, "epochs": args.epochs, "stops": args.stops,
                   "total_s": total, "prior_load_s": load_s, "peak_rss_mib": peak_mib,
-                  "final_metric": design.metrics[args.task],
-                  "source": design.meta.get("source"),
-                  "samples": design.meta.get("samples"),
+                  "final_metric": final, "units": units,
+                  "source": None if design is None else design.meta.get("source"),
+                  "samples": None if design is None else design.meta.get("samples"),
                   "stages_s": {k: v for k, v, _ in rows},
                   "stage_calls": {k: n for k, _, n in rows[:-1]},
                   "simulator_passes": passes, "simulator_pass_log": episodes.rows}, args.out,
-                 Path(__file__).parent / "results" / "design.json", args.quick,
+                 default, args.quick,
                  {"benchmark": "design", "run": config,
                   "entry_points": [f"{s}: {m}:{a}" for s, m, a in STAGES]})
 

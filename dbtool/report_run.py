@@ -6,7 +6,7 @@ PATH is one of four kinds (:func:`path_kind`, shared with ``dbtool view``): an e
 compare``'s: :mod:`dbtool.compare.page`), a ``dbtool design`` run directory (its
 ``design.npz``, ``config.json``, ``manifest.json`` and ``metrics.jsonl`` are read) or a
 ``design.npz``. A design is simulated again with its own controller for the rollout, and its
-report goes next to it (:func:`dbtool.codesign.design_run.write_run_report`,
+report goes next to it (:func:`dbtool.codesign.run_figures.write_run_report`,
 :mod:`dbtool.viz.report`).
 """
 
@@ -81,7 +81,7 @@ def report_run(path: str | Path) -> Path:
 
         return write_comparison_page(path)
     from dbtool.atomic import check_writable
-    from dbtool.codesign.design_run import write_run_report
+    from dbtool.codesign.run_figures import write_run_report
 
     file = design_file(path)
     check_writable(file.parent / "report.html")

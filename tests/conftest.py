@@ -45,3 +45,14 @@ def taichi_precision(request):
     runtime.init("cpu", getattr(request.module, "PRECISION", "f32"))
     yield
     runtime.init("cpu", "f32")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Tests marked ``slow`` (tens of minutes on a laptop CPU) run only with ``DBTOOL_SLOW=1``
+    (``DBTOOL_SLOW=1 pytest -m slow``); everywhere else they are reported as skipped."""
+    if os.environ.get("DBTOOL_SLOW") == "1":
+        return
+    skip = pytest.mark.skip(reason="slow: set DBTOOL_SLOW=1 to run")
+    for item in items:
+        if "slow" in item.keywords:
+            item.add_marker(skip)

@@ -204,6 +204,23 @@ def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp
         for k, v in traj_a.items():
             np.testing.assert_array_equal(t[k], v)
 
+    # the same run paused (checkpointed) after two Langevin stops of its co-designed sample:
+    # the checkpoint holds the unfinished chain at t = 200, and the resumed run finishes it
+    c = DesignRun(tmp_path / "c", _settings(), prior)
+    c.start("cpu")
+    assert c.run(show_progress=False, pause_after_stops=2) is None
+    assert not (tmp_path / "c" / "design.npz").exists()
+    rc = DesignRun.resume(tmp_path / "c", prior)
+    assert rc.state.epoch == 2 and rc.state.samples == []
+    part = rc.state.partial
+    assert part.t == 200 and [s.t for s in part.trajectory] == [400, 200]
+    assert len(part.history) == 2 * _small_preset("quick", "gripping")[1].K
+    dc = rc.run(show_progress=False)
+    assert rc.state.partial is None
+    assert dc.metrics["gripping"] == da.metrics["gripping"]
+    np.testing.assert_array_equal(dc.surface, da.surface)
+    assert [json.loads(line) for line in (tmp_path / "c" / "metrics.jsonl").open()] == rows
+
     # a finished run refuses to be overwritten
     with pytest.raises(RunDirectoryError, match="already holds a run"):
         DesignRun(tmp_path / "a", _settings(), prior).start("cpu")

@@ -7,7 +7,7 @@ Files of a run (each written atomically: temp file, then rename)::
     config.json      resolved settings and both configs (Tables 4-5 after the preset)
     manifest.json    provenance (commit, config hash, time, machine, versions), seed, device
     metrics.jsonl    one row per epoch and per co-design Langevin step
-    checkpoint.pt    state after the last completed epoch / co-designed sample
+    checkpoint.pt    state after the last completed epoch / Langevin stop of a co-designed sample
     best.npz         the best designs of all embedding epochs (clouds, metrics)
     trajectory.npz   each co-designed sample's x_t and x0-estimate at every Langevin stop
     design.npz       the final robot (upsampled cloud, fields, controller, metric)
@@ -16,7 +16,8 @@ Files of a run (each written atomically: temp file, then rename)::
 
 ``--resume`` reloads ``checkpoint.pt`` and continues from the last completed unit of work;
 everything in it is restored (embedding, Adam state, random generator, buffer, finished
-co-design samples), so a resumed run repeats the uninterrupted one.
+co-design samples, the chain of the unfinished one), so a resumed run repeats the uninterrupted
+one.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ from dbtool.codesign.config import (
     preset,
 )
 from dbtool.codesign.embedding import EmbeddingOptimiser, score
-from dbtool.codesign.langevin import codesign_sample
+from dbtool.codesign.langevin import ChainState, codesign_sample
 from dbtool.errors import InputError, RunError
 from dbtool.sim.tasks import N_STEPS, Task, get_task
 
@@ -63,14 +64,16 @@ def guidance_terms(prior, c: torch.Tensor, guidance: float, prompt: str | None =
 
 
 def codesign_design(prior, task: Task, conds: list[tuple], cfg: CodesignConfig, seed: int,
-                    steps: int, n_steps: int = N_STEPS, on_step=None) -> dict:
+                    steps: int, n_steps: int = N_STEPS, on_step=None, on_stop=None,
+                    resume: ChainState | None = None) -> dict:
     """One design of diffusion as co-design (docs/method.md §5) and its score:
     ``{"cloud", "metric", "controller", "stop", "trajectory"}``. The final sample is scored
     forward with its co-optimised controller (NaN where it cannot be robotized or simulated); with
     ``cfg.handover == "best"`` the best design the chain simulated replaces it when it scored
-    higher, and ``stop`` is the timestep that made it (None: the final sample)."""
+    higher, and ``stop`` is the timestep that made it (None: the final sample). ``on_stop`` and
+    ``resume``: see :func:`~dbtool.codesign.langevin.codesign_sample`."""
     res = codesign_sample(prior, task, conds, cfg, seed=seed, steps=steps, n_steps=n_steps,
-                          on_step=on_step)
+                          on_step=on_step, on_stop=on_stop, resume=resume)
     metric = float(score(res.cloud[None], task, n_steps, controllers=[res.controller])[0])
     out = {"cloud": res.cloud, "metric": metric, "controller": res.controller, "stop": None}
     b = res.best
@@ -136,6 +139,11 @@ class State:
     epoch: int = 0
     rows: list[dict] = field(default_factory=list)
     samples: list[dict] = field(default_factory=list)  # finished co-design samples
+    partial: ChainState | None = None  # the unfinished sample's chain after its last stop
+
+
+class Paused(Exception):  # noqa: N818 - not an error: the run stopped where it was asked to
+    """Raised inside :meth:`DesignRun.run` after the requested Langevin stops."""
 
 
 def _savez(path: Path, **arrays) -> Path:
@@ -204,7 +212,8 @@ class DesignRun:
                    "controller": None if s["controller"] is None
                    else torch.as_tensor(s["controller"]),
                    **({"trajectory": {k: torch.as_tensor(v) for k, v in s["trajectory"].items()}}
-                      if s.get("trajectory") else {})} for s in self.state.samples]}
+                      if s.get("trajectory") else {})} for s in self.state.samples],
+              "partial": None if self.state.partial is None else self.state.partial.to_dict()}
 
         def save(tmp: str) -> None:
             bio = io.BytesIO()
@@ -246,6 +255,8 @@ class DesignRun:
                  **({"trajectory": {k: v.numpy() for k, v in s["trajectory"].items()}}
                     if "trajectory" in s else {})}
                 for s in ck["samples"]])
+            if ck.get("partial") is not None:
+                run.state.partial = ChainState.from_dict(ck["partial"])
         except RunDirectoryError:
             raise
         except Exception as exc:  # noqa: BLE001 - any damage gets the same one-line error
@@ -261,10 +272,22 @@ class DesignRun:
         return guidance_terms(self.prior, self.opt.current(), self.emb_cfg.guidance, s.prompt,
                               s.prompt_guidance, s.prompt_t_min)
 
-    def run(self, show_progress: bool = True, report: bool = True):
+    def run(self, show_progress: bool = True, report: bool = True,
+            pause_after_stops: int | None = None):
         """Finish the run from wherever it stands; returns the final :class:`Design`
-        (``report``: also write ``report.html``, :func:`write_run_report`)."""
+        (``report``: also write ``report.html``, :func:`write_run_report`), or None when
+        paused (checkpointed) after ``pause_after_stops`` Langevin stops of this call."""
         from tqdm import tqdm
+
+        stops_left = [pause_after_stops]
+
+        def stop_done(chain: ChainState) -> None:
+            self.state.partial = chain
+            self.checkpoint()
+            if stops_left[0] is not None:
+                stops_left[0] -= 1
+                if stops_left[0] <= 0:
+                    raise Paused
 
         emb, cod = self.emb_cfg, self.cod_cfg
         with tqdm(total=emb.epochs, initial=self.state.epoch, desc="embedding epochs",
@@ -287,10 +310,15 @@ class DesignRun:
             while len(self.state.samples) < n:
                 k = len(self.state.samples)
                 seed = self.settings.seed * 1_000_003 + 10_007 * (k + 1)
-                sample = codesign_design(
-                    self.prior, self.task, conds, cod, seed, emb.sample_steps,
-                    self.settings.n_steps,
-                    on_step=lambda r, k=k: self.log(phase="codesign", sample=k, **r))
+                try:
+                    sample = codesign_design(
+                        self.prior, self.task, conds, cod, seed, emb.sample_steps,
+                        self.settings.n_steps,
+                        on_step=lambda r, k=k: self.log(phase="codesign", sample=k, **r),
+                        on_stop=stop_done, resume=self.state.partial)
+                except Paused:
+                    return None
+                self.state.partial = None
                 self.state.samples.append(sample)
                 self.log(phase="codesign", sample=k, final=True, metric=sample["metric"],
                          stop=sample["stop"])
@@ -350,6 +378,8 @@ class DesignRun:
         design = Design(self.task.name, robot, ctrl, surface, {self.task.name: ro.metric},
                         meta)
         design.save(self.path / "design.npz")
+        from dbtool.codesign.run_figures import performance_figure, write_run_report
+
         performance_figure(self.state.rows, self.path / "performance.png", self.task.title)
         montage(ro.episode, ro.positions, self.path / "montage.png",
                 title=f"{self.task.title}: metric {ro.metric:.4f}")
@@ -362,64 +392,3 @@ def source(sample: dict) -> str:
     """Which stage made a co-designed sample: its final sample or the stop of the chain."""
     stop = sample.get("stop")
     return "co-design (final sample)" if stop is None else f"co-design (stop t = {stop})"
-
-
-def write_run_report(folder: Path, design, ro, rows: list[dict]) -> Path:
-    """``folder/report.html`` (:mod:`dbtool.viz.report`): the run's performance curves, the
-    design and its rollout ``ro``, the folder's config and manifest."""
-    from dbtool.sim.tasks import get_task
-    from dbtool.viz.report import write_report
-
-    def read(name: str) -> dict | None:
-        f = folder / name
-        return json.loads(f.read_text()) if f.is_file() else None
-
-    task = get_task(design.task)
-    summary = {"task": task.title, **{k: design.meta[k] for k in ("method", "preset", "seed",
-                                                                   "source", "prompt")
-                                      if design.meta.get(k) is not None}}
-    return write_report(folder / "report.html", f"dbtool: {task.title}, {folder.name}",
-                        ro.episode, ro.positions, ro.metric, performance_panels(rows),
-                        summary, read("config.json"), read("manifest.json"))
-
-
-def performance_panels(rows: list[dict]) -> list:
-    """The run's two performance plots from its logged rows: mean and max per embedding
-    epoch, and the metric of x_t along each co-designed sample's chain."""
-    from dbtool.viz.report import Curve, Panel
-
-    ep = [r for r in rows if r.get("phase") == "embedding"]
-    epochs = [r["epoch"] for r in ep]
-    emb = Panel("embedding optimisation", "epoch", "performance",
-                [Curve("mean", epochs, [r["mean"] for r in ep]),
-                 Curve("max", epochs, [r["max"] for r in ep])] if ep else [])
-    cd = [r for r in rows if r.get("phase") == "codesign" and "metric" in r
-          and not r.get("final")]
-    chain = Panel("diffusion as co-design", "Langevin step", "performance of x_t")
-    for s in sorted({r["sample"] for r in cd}):
-        pts = [r["metric"] for r in cd if r["sample"] == s]
-        chain.curves.append(Curve(f"sample {s}", list(range(len(pts))), pts))
-    return [emb, chain]
-
-
-def performance_figure(rows: list[dict], path: Path, title: str) -> Path:
-    """Mean and max performance per epoch, and the metric of x_t along co-design."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(9, 3.2))
-    styles, fonts = (("o-", "s--"), ("o-",)), (None, 7)  # the epochs' panel, the chains'
-    for ax, panel, style, font in zip(axes, performance_panels(rows), styles, fonts,
-                                      strict=True):
-        for i, c in enumerate(panel.curves):
-            ax.plot(c.x, c.y, style[min(i, len(style) - 1)], label=c.label)
-        if panel.curves:
-            ax.legend(fontsize=font)
-        ax.set(xlabel=panel.xlabel, ylabel=panel.ylabel, title=panel.title)
-    fig.suptitle(title)
-    fig.tight_layout()
-    out = atomic_write(path, lambda p: fig.savefig(p, dpi=110, format="png"))
-    plt.close(fig)
-    return out

@@ -42,10 +42,16 @@ Every design the chain simulates is a candidate; with ``handover="best"`` the be
 (or the final sample, if it scores higher) is the design handed over, and the result says at
 which stop it was made. The result's ``trajectory`` keeps x_t and its x0-estimate after each
 stop's Langevin steps (the co-design trajectory the viewer scrubs, docs/viewing.md).
+
+After each stop the chain's whole state (:class:`ChainState`: x_t, both random generators,
+controller, best design, history) can be handed to a callback and the sample later resumed from
+it, giving the same sample as an uninterrupted chain (a paper-preset sample runs for hours on a
+CPU, so a design run checkpoints it stop by stop).
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -174,6 +180,42 @@ class _Chain:
     best: Candidate | None = None  # the best design simulated so far
 
 
+@dataclass
+class ChainState:
+    """A co-design sample after the Langevin steps of one stop: everything needed to continue
+    it exactly (``index``: the stop's position in the denoising loop's timesteps)."""
+
+    index: int
+    t: int
+    x: torch.Tensor  # x_t after the stop's Langevin steps (model space, (1, N, 3))
+    denoise_rng: torch.Tensor  # state of the denoising loop's generator at this step
+    langevin_rng: torch.Tensor  # state of the Langevin noise's generator
+    phi: np.ndarray | None
+    best: Candidate | None
+    history: list[dict]
+    trajectory: list[Stop]
+
+    def to_dict(self) -> dict:
+        """Tensors, numbers and strings only (a ``torch.load(weights_only=True)`` checkpoint)."""
+        b, arr = self.best, (lambda a: None if a is None else torch.as_tensor(a))
+        return {"index": self.index, "t": self.t, "x": self.x, "denoise_rng": self.denoise_rng,
+                "langevin_rng": self.langevin_rng, "phi": arr(self.phi),
+                "best": None if b is None else {"cloud": arr(b.cloud), "metric": b.metric,
+                                                "controller": arr(b.controller), "t": b.t},
+                "history": json.dumps(self.history),
+                "trajectory": [{"t": s.t, "xt": arr(s.xt), "x0": arr(s.x0)}
+                               for s in self.trajectory]}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> ChainState:
+        arr, b = (lambda a: None if a is None else a.numpy()), d["best"]
+        return cls(int(d["index"]), int(d["t"]), d["x"], d["denoise_rng"], d["langevin_rng"],
+                   arr(d["phi"]), None if b is None else Candidate(
+                       arr(b["cloud"]), float(b["metric"]), arr(b["controller"]), int(b["t"])),
+                   json.loads(d["history"]),
+                   [Stop(int(s["t"]), arr(s["xt"]), arr(s["x0"])) for s in d["trajectory"]])
+
+
 def _physics_drift(chain: _Chain, x: torch.Tensor, t: int, eps: torch.Tensor,
                    model_score: torch.Tensor, task: Task, cfg: CodesignConfig, sched,
                    n_steps: int, row: dict) -> tuple[torch.Tensor, torch.Tensor | float]:
@@ -220,27 +262,38 @@ def _physics_drift(chain: _Chain, x: torch.Tensor, t: int, eps: torch.Tensor,
 def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float]],
                     cfg: CodesignConfig, seed: int = 0, steps: int = 64,
                     n_steps: int = N_STEPS, controller: np.ndarray | None = None,
-                    on_step: Callable[[dict], None] | None = None) -> CodesignResult:
+                    on_step: Callable[[dict], None] | None = None,
+                    on_stop: Callable[[ChainState], None] | None = None,
+                    resume: ChainState | None = None) -> CodesignResult:
     """One design sampled with the co-design Langevin steps (module docstring).
 
     ``conds`` are the guidance terms (the optimised embedding and, for text feedback, the
     prompt); ``kappa = 0`` gives the plain denoising loop plus score-only Langevin steps (the
     ablation). Failures of the robotizer or the simulator at a noisy x_t skip the physics
-    term of that step (recorded in the history)."""
+    term of that step (recorded in the history). ``on_stop`` receives the chain's state after
+    each stop; ``resume`` (such a state, with the same arguments otherwise) continues it."""
     sched = prior.scheduler
     chain = _Chain(None)
     if task.n_groups > 0:
         chain.phi = np.array(task.controller(n_steps) if controller is None else controller,
                              float)
     gen = torch.Generator().manual_seed(seed + 7_919)
+    dgen = torch.Generator().manual_seed(seed)
     at = stops(cfg)
     history: list[dict] = []
     trajectory: list[Stop] = []
+    if resume is not None:
+        gen.set_state(resume.langevin_rng)
+        dgen.set_state(resume.denoise_rng)
+        chain = _Chain(None if resume.phi is None else resume.phi.copy(), resume.best)
+        history, trajectory = list(resume.history), list(resume.trajectory)
     last = None
-    for step in prior.denoising_loop(conds, 1, steps, seed, include=at):
+    for step in prior.denoising_loop(conds, 1, steps, seed, include=at, generator=dgen,
+                                     x_T=None if resume is None else resume.x,
+                                     start=0 if resume is None else resume.index):
         last = step
-        if step.t not in at or cfg.K < 1:
-            continue
+        if step.t not in at or cfg.K < 1 or (resume is not None and step.index == resume.index):
+            continue  # (the resumed stop's Langevin steps are done)
         t, x = step.t, step.x
         beta, ab = sched.beta(t), sched.alpha_bar(t)
         eta = min(cfg.step_scale * beta, 1.0 - ab)
@@ -261,5 +314,9 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
         x0 = sched.predict_x0(x, t, guided_eps(prior.eps, x, t, conds,
                                                   interval=prior.guidance_interval))
         trajectory.append(Stop(t, x[0].numpy() / SCALE, x0[0].numpy() / SCALE))
+        if on_stop is not None:
+            on_stop(ChainState(step.index, t, x.clone(), dgen.get_state(), gen.get_state(),
+                               None if chain.phi is None else chain.phi.copy(), chain.best,
+                               list(history), list(trajectory)))
     cloud = last.x[0].numpy() / SCALE
     return CodesignResult(cloud, chain.phi, history, chain.best, trajectory)

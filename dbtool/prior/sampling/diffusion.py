@@ -67,8 +67,11 @@ class Step:
 def denoise(scheduler: Scheduler, model: EpsModel, x_T: torch.Tensor,
             conds: Sequence[tuple], steps: int = 64, t_start: int | None = None,
             include: Sequence[int] = (), generator: torch.Generator | None = None,
-            interval: tuple[int, int] | None = None) -> Iterator[Step]:
+            interval: tuple[int, int] | None = None, start: int = 0) -> Iterator[Step]:
     """Denoise ``x_T`` with composed classifier-free guidance; yields before every update.
+
+    ``start`` resumes a loop: ``x_T`` is then the x at the ``start``-th timestep of the grid
+    and ``generator`` the state the interrupted loop's generator had there.
 
     ``conds`` is a list of ``(embedding (B or 1, D), guidance scale)``; see :func:`guided_eps`
     (and its ``interval``). After the last update the generator yields a final :class:`Step`
@@ -76,6 +79,8 @@ def denoise(scheduler: Scheduler, model: EpsModel, x_T: torch.Tensor,
     ts = scheduler.timesteps(steps, t_start, include)
     x, x0 = x_T, None
     for i, t in enumerate(ts):
+        if i < start:
+            continue
         t_prev = ts[i + 1] if i + 1 < len(ts) else -1
         step = Step(i, t, t_prev, x, x0)
         yield step

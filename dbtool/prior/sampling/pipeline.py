@@ -215,22 +215,24 @@ class Prior:
     def denoising_loop(self, conds: Sequence[tuple[torch.Tensor, float]], n: int, steps: int = 64,
                 seed: int = 0, points: int = COARSE_POINTS, include: Sequence[int] = (),
                 t_start: int | None = None, x_T: torch.Tensor | None = None,
-                scheduler: Scheduler | None = None) -> Iterator[Step]:
+                scheduler: Scheduler | None = None, generator: torch.Generator | None = None,
+                start: int = 0) -> Iterator[Step]:
         """The base model's denoising loop (steps by ``scheduler``, default :attr:`scheduler`)
         as a generator of :class:`Step` (model space, see
         :func:`~dbtool.prior.sampling.diffusion.denoise`); the caller may replace ``step.x``
-        between updates."""
+        between updates. ``generator`` (default: seeded by ``seed``) draws x_T and the
+        updates' noise; with ``start`` and ``x_T`` the loop resumes at that step."""
         for c, s, *_ in conds:
             if not np.isfinite(s) or abs(s) > MAX_GUIDANCE:
                 raise InputError(f"guidance scale {s} is outside [-{MAX_GUIDANCE}, "
                                  f"{MAX_GUIDANCE}]")
             if c.dim() != 2 or c.shape[-1] != self.cond_dim:
                 raise ValueError(f"a condition must have shape (1 or n, {self.cond_dim})")
-        gen = torch.Generator().manual_seed(seed)
+        gen = torch.Generator().manual_seed(seed) if generator is None else generator
         if x_T is None:
             x_T = torch.randn((n, points, 3), generator=gen)
         return denoise(scheduler or self.scheduler, self.eps, x_T, conds, steps, t_start,
-                       include, gen, self.guidance_interval)
+                       include, gen, self.guidance_interval, start)
 
     def sample(self, prompts: Sequence[str] | str | None = None, n: int = 1,
                guidance: float = 3.0, steps: int = 64, seed: int = 0,
