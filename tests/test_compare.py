@@ -256,6 +256,13 @@ def test_resume_after_a_kill_skips_the_finished_cell(serial_run, tmp_path):
     before = first.stat().st_mtime_ns, first.read_bytes()
     wall = json.loads(before[1])["wall_s"]
 
+    # a resume that names cells runs only those: particle is finished, prior was not asked for
+    res = _compare("--resume", "--out", str(out), "--executor", "serial", "--methods",
+                   "particle")
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "2 cells, 1 finished, 0 to run on serial (budget smoke)" in res.stdout
+    assert not (_cell(out, "prior", TASK) / "cell.json").exists()
+
     res = _compare("--resume", "--out", str(out), "--executor", "serial")
     assert res.returncode == 0, res.stderr[-3000:]
     assert "2 cells, 1 finished, 1 to run on serial (budget smoke)" in res.stdout

@@ -46,7 +46,8 @@ def compare_command(
     out: Path = typer.Option(None, "--out", "-o", help="comparison folder (default "
                              "runs/compare-BUDGET-TIME)"),
     resume: bool = typer.Option(False, help="finish the comparison in --out: skip finished "
-                                "cells, rerun failed ones, add new ones"),
+                                "cells, rerun failed ones, add new ones; with --tasks, "
+                                "--methods or --seeds only those cells run"),
 ) -> None:
     """Run the methods x tasks x seeds table: one folder per cell, results.csv, table.md,
     bar chart and the Figure-12 grid of robots."""

@@ -173,6 +173,7 @@ def compare(cfg: CompareConfig, out: str | Path, executor: str = "serial", worke
                       meta.get("arch", "cpu"), tag) for m, t, s in meta["cells"]]
     finished = {sp.name for sp in specs
                 if (read_cell(sp.folder) or {}).get("status") == "done"}
+    wanted = {tuple(c) for c in cfg.cells()}  # a resume runs the cells it was asked for
     budget = get_budget(meta["budget"])
     source: dict[tuple[str, str], CellSpec] = {}  # the cell a seedless method's others copy
     for sp in specs:
@@ -180,7 +181,7 @@ def compare(cfg: CompareConfig, out: str | Path, executor: str = "serial", worke
             source.setdefault((sp.method, sp.task), sp)
     todo, copies = [], []
     for sp in specs:
-        if sp.name in finished:
+        if sp.name in finished or (sp.method, sp.task, sp.seed) not in wanted:
             continue
         if seeded(sp.method, budget):
             todo.append(sp)
