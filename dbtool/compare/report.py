@@ -24,6 +24,7 @@ import numpy as np  # noqa: E402
 from dbtool.atomic import atomic_write_text  # noqa: E402
 from dbtool.compare.labels import grid_shape, method_name, ordered, task_title  # noqa: E402
 from dbtool.compare.methods import TITLES  # noqa: E402
+from dbtool.compare.paired import paired_markdown  # noqa: E402
 from dbtool.design import Design, DesignFileError  # noqa: E402
 from dbtool.errors import InputError, MissingFileError
 from dbtool.sim.task_names import NAMES as TASKS  # noqa: E402
@@ -293,8 +294,9 @@ def robot_grid(out_dir: str | Path, rows: list[dict], path: str | Path,
 
 # ---------------------------------------------------------------------------------- report
 def write_report(out_dir: str | Path) -> dict[str, Path]:
-    """Read ``out_dir/results.csv``; write ``table.md``, ``bars.png``, ``robots.png`` and the
-    anytime curves (:func:`dbtool.compare.anytime.write_anytime`) there."""
+    """Read ``out_dir/results.csv``; write ``table.md``, the paired differences ``paired.md``
+    (:mod:`dbtool.compare.paired`), ``bars.png``, ``robots.png`` and the anytime curves
+    (:func:`dbtool.compare.anytime.write_anytime`) there."""
     out_dir = Path(out_dir)
     csv_path = out_dir / "results.csv"
     rows = read_results(csv_path)
@@ -304,6 +306,7 @@ def write_report(out_dir: str | Path) -> dict[str, Path]:
 
     return {
         "table": atomic_write_text(out_dir / "table.md", table_markdown(rows)),
+        "paired": atomic_write_text(out_dir / "paired.md", paired_markdown(rows)),
         "bars": bar_chart(rows, out_dir / "bars.png"),
         "robots": robot_grid(out_dir, rows, out_dir / "robots.png"),
         **write_anytime(out_dir),
