@@ -162,8 +162,10 @@ def test_grid_cells_pick(folder):
 
 def test_write_report_figures(folder):
     paths = report.write_report(folder)
-    assert set(paths) == {"table", "bars", "robots"}
+    assert set(paths) == {"table", "paired", "bars", "robots"}
     assert paths["table"].read_text() == report.table_markdown(
+        report.read_results(folder / "results.csv"))
+    assert paths["paired"].read_text() == report.paired_markdown(
         report.read_results(folder / "results.csv"))
     bars = _image(paths["bars"])
     robots = _image(paths["robots"])
