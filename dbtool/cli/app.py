@@ -109,8 +109,10 @@ def design(
                                        prompt_t_min=prompt_t_min, prior=prior), run_dir, resume,
                               arch)
         if resume is not None:
+            part = run.state.partial
             typer.echo(f"resuming {resume} at epoch {run.state.epoch}, "
-                       f"{len(run.state.samples)} co-designed samples done")
+                       f"{len(run.state.samples)} co-designed samples done"
+                       + ("" if part is None else f", the next one at its stop t = {part.t}"))
         typer.echo(f"run directory: {run.path}")
         try:
             result = run.run(show_progress=True, report=report)
