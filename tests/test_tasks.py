@@ -117,6 +117,24 @@ def test_crawler_with_prescribed_controller_moves():
     assert abs(passive.metric) < 1e-4
 
 
+def test_balancing_body_lands_back_on_the_stick_without_passing_into_it():
+    """Thrown up, the box falls back onto the stick and drapes over it: it stays above the
+    stick's top, and no particle is deeper than one grid cell inside the stick (the colliders
+    act on grid nodes; measured at most 4.7 mm of a 5 mm cell, on a standard-budget design)."""
+    task = get_task("balancing")
+    ro = simulate(task, reference_robot(task, "box").compact())
+    ep, x = ro.episode, np.asarray(ro.positions)[:, ro.episode.robot_mask]
+    (c, h), = ep.scene.boxes
+    c, h = np.array(c), np.array(h)
+    top = c[1] + h[1]
+    y = x[:, :, 1].mean(1)
+    assert y.argmax() > 5 and y[-1] < y.max() - 5e-3  # thrown up, then falling back
+    assert y.min() > top  # resting on the stick, not slid off or through it
+    inside = np.all(np.abs(x - c) < h, axis=2)
+    depth = np.minimum((h[[0, 2]] - np.abs(x[..., [0, 2]] - c[[0, 2]])).min(-1), top - x[..., 1])
+    assert depth[inside].max(initial=0.0) < ep.scene.dx
+
+
 def test_gripper_fingers_close():
     task = get_task("gripping")
     ro = simulate(task, reference_robot(task, "sphere").compact())
