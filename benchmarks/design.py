@@ -188,6 +188,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--task", default="gripping")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--arch", default="cpu", choices=["cpu", "cuda", "auto"],
+                    help="the simulator's Taichi backend")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--preset", default="quick", choices=["quick", "paper"])
     ap.add_argument("--epochs", type=int, default=None, help="embedding epochs (default: the "
@@ -202,7 +204,7 @@ def main() -> None:
     from dbtool.prior.sampling.pipeline import Prior
     from dbtool.sim import runtime
 
-    runtime.init(arch="cpu")
+    runtime.init(arch=args.arch)
     t0 = time.perf_counter()
     prior = Prior.load()
     load_s = time.perf_counter() - t0
@@ -252,6 +254,7 @@ def main() -> None:
     default = Path(__file__).parent / "results" / (
         "design.json" if args.preset == "quick" else f"design-{args.preset}.json")
     write_result({"task": args.task, "seed": args.seed, "quick": args.quick,
+                  "arch": args.arch, "device": runtime.device(),
                   "preset": args.preset, "epochs": args.epochs, "stops": args.stops,
                   "total_s": total, "prior_load_s": load_s, "peak_rss_mib": peak_mib,
                   "final_metric": final, "units": units,
