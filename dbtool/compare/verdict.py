@@ -9,7 +9,8 @@ from pathlib import Path
 
 from dbtool.atomic import atomic_write
 from dbtool.compare.budget import GRAD_COST
-from dbtool.compare.methods import METHODS, TITLES
+from dbtool.compare.labels import method_name
+from dbtool.compare.methods import METHODS
 from dbtool.compare.report import TASKS, cell_dir
 
 
@@ -92,7 +93,7 @@ def why_figure(out_dir: str | Path, task: str, methods: list[str], path: str | P
         if pts:
             x, y = zip(*pts, strict=True)
             best = [max(y[: k + 1]) for k in range(len(y))]
-            line = ax.step(x, best, where="post", label=f"{TITLES.get(m, m)} (best so far)")
+            line = ax.step(x, best, where="post", label=f"{method_name(m)} (best so far)")
             ax.plot(x, y, "o", ms=3, alpha=0.5, color=line[0].get_color())
         img = fig.add_subplot(grid[i, 1:])
         if (folder / "montage.png").is_file():
@@ -100,7 +101,7 @@ def why_figure(out_dir: str | Path, task: str, methods: list[str], path: str | P
         else:  # a comparison folder kept without its cells' montages
             img.text(0.5, 0.5, f"no montage.png in {folder.name}", ha="center", va="center")
         img.set_axis_off()
-        img.set_title(f"{TITLES.get(m, m)}: final design", fontsize=9)
+        img.set_title(f"{method_name(m)}: final design", fontsize=9)
     ax.set(xlabel="budget spent (forward-episode units)", ylabel="metric",
            title=f"{task}, seed {seed}")
     ax.legend(fontsize=8)
