@@ -36,8 +36,11 @@ def test_only_seeds_done_by_both_are_paired_and_one_seed_has_no_interval():
                  failed=[("cppn", "box", 1)])
     (d,) = paired_differences(rows)
     assert d["seeds"] == [0] and d["lo"] is None and d["sign"] == 0
-    assert "one seed only" in verdict([d], "box")
+    assert verdict([d], "box").endswith(
+        "one seed only with diff-CPPN (no interval) (1 paired seed).")
     rows = _rows({("diffusebot", "box"): [2.0, 2.2, 2.1], ("cppn", "box"): [1.0, 1.1, 1.0]})
-    assert "better than every other method" in verdict(paired_differences(rows), "box")
+    assert verdict(paired_differences(rows), "box") == (
+        "Moving a box: DiffuseBot is better than every method it was paired with (diff-CPPN; "
+        "every 95% interval above 0, 3 paired seeds).")
     text = paired_markdown(rows)
     assert "| Moving a box | diff-CPPN | 3 | 1.07 |" in text and "better" in text

@@ -55,9 +55,10 @@ def verdict(diffs: list[dict], task: str) -> str:
     single = [method_name(d["other"]) for d in mine if d["lo"] is None]
     n = sorted({d["n"] for d in mine})
     seeds = f"{n[0]}" if len(n) == 1 else f"{n[0]}-{n[-1]}"
-    if len(group[1]) == len(mine):
-        return (f"{task_title(task)}: {name} is better than every other method (every 95% "
-                f"interval above 0, {seeds} paired seeds).")
+    seeds += " paired seed" if n == [1] else " paired seeds"
+    if len(group[1]) == len(mine):  # names them: a table under way pairs only some methods
+        return (f"{task_title(task)}: {name} is better than every method it was paired with "
+                f"({', '.join(group[1])}; every 95% interval above 0, {seeds}).")
     parts = []
     if group[1]:
         parts.append(f"better than {', '.join(group[1])}")
@@ -67,7 +68,7 @@ def verdict(diffs: list[dict], task: str) -> str:
         parts.append(f"not separable from {', '.join(group[0])} (the interval holds 0)")
     if single:
         parts.append(f"compared on one seed only with {', '.join(single)} (no interval)")
-    return f"{task_title(task)}: {name} is {'; '.join(parts)} ({seeds} paired seeds)."
+    return f"{task_title(task)}: {name} is {'; '.join(parts)} ({seeds})."
 
 
 def paired_markdown(rows: list[dict], method: str = "diffusebot") -> str:
