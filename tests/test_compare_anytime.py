@@ -73,3 +73,23 @@ def test_curves_average_seeds_and_write_one_figure_per_task(tmp_path):
     assert json.loads((tmp_path / "anytime.json").read_text()) == data
     assert len(paths) == 4
     assert write_anytime(tmp_path / "empty") == {}
+
+
+def test_the_summary_legend_names_every_method_of_any_panel():
+    """A table under way: balancing has only particle, landing prior and DiffuseBot; the
+    summary's legend still names all three, in the methods' order."""
+    import matplotlib.pyplot as plt
+
+    from dbtool.compare.anytime import _panel, summary_legend
+    from dbtool.compare.methods import METHODS
+
+    def curve(seeds):
+        return {"units": [0.0, 1.0], "mean": [0.1, 0.2], "min": [0.1, 0.2], "max": [0.1, 0.2],
+                "seeds": seeds}
+
+    fig, axes = plt.subplots(1, 2)
+    _panel(axes[0], {"particle": curve([0, 1])}, "Balancing", METHODS)
+    _panel(axes[1], {"diffusebot": curve([0]), "prior": curve([0, 1, 2])}, "Landing", METHODS)
+    handles, names = summary_legend(axes, METHODS)
+    plt.close(fig)
+    assert names == ["particle", "prior samples", "DiffuseBot"] and len(handles) == 3

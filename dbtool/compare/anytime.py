@@ -145,6 +145,17 @@ def _panel(ax, data: dict, title: str, methods_order) -> None:
     ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))
 
 
+def summary_legend(axes, methods) -> tuple[list, list[str]]:
+    """One legend entry per method drawn in any of ``axes`` (a table under way lacks some
+    methods on some tasks), in the order of ``methods``, without the per-panel seed counts."""
+    seen: dict[str, object] = {}
+    for ax in axes:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            seen.setdefault(lab.split(" (")[0], h)
+    names = [n for n in map(method_name, methods) if n in seen]
+    return [seen[n] for n in names], names
+
+
 def write_anytime(out_dir: str | Path, dpi: int = 100) -> dict[str, Path]:
     """``anytime.json``, one ``anytime-TASK.png`` per task and the summary ``anytime.png`` (all
     tasks side by side) in ``out_dir``; nothing when no cell has progress rows."""
@@ -173,10 +184,10 @@ def write_anytime(out_dir: str | Path, dpi: int = 100) -> dict[str, Path]:
         _panel(axes.flat[k], data[t], task_title(t), methods)
     for ax in list(axes.flat)[len(tasks):]:
         ax.set_axis_off()
-    handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(handles, [lab.split(" (")[0] for lab in labels], loc="lower center",
-               ncol=len(labels), fontsize=8, frameon=False)
-    fig.suptitle(f"Best metric found against units spent: {note}", fontsize=9)
+    handles, names = summary_legend(axes.flat[:len(tasks)], methods)
+    fig.legend(handles, names, loc="lower center", ncol=len(names), fontsize=8, frameon=False)
+    fig.suptitle("Best metric found against units spent: mean over seeds (line), min to max "
+                 "(band)", fontsize=9)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
     paths["anytime"] = save_figure(fig, out_dir / "anytime.png", dpi)
     return paths
