@@ -1,9 +1,12 @@
 """Print the finished cells of a comparison folder as the progress table of docs/results.md.
 
-usage: python benchmarks/state/progress.py [DIR]   (default benchmarks/state/compare-standard)
+usage: python benchmarks/state/progress.py [DIR] [--docs FILE]
+       (default DIR benchmarks/state/compare-standard)
 
 One row per (method, task) with a finished cell: the metric and the wall time on one thread
-per seed, read from each cell's ``cell.json``.
+per seed, read from each cell's ``cell.json``; then the paired differences DiffuseBot − each
+method over the seeds both finished (``dbtool/compare/paired.py``). ``--docs FILE`` writes
+both between FILE's ``<!-- standard-progress -->`` and ``<!-- /standard-progress -->`` lines.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from pathlib import Path
 
 from dbtool.compare.labels import method_name, ordered, task_title
 from dbtool.compare.methods import TITLES
+from dbtool.compare.paired import paired_markdown
 from dbtool.sim.task_names import NAMES
 
 
@@ -40,8 +44,31 @@ def progress_markdown(cells: list[dict], seeds: tuple[int, ...] = (0, 1, 2)) -> 
     return "\n".join(lines)
 
 
-if __name__ == "__main__":
-    folder = Path(sys.argv[1] if len(sys.argv) > 1 else "benchmarks/state/compare-standard")
+def progress_block(folder: Path, total: int = 108) -> str:
+    """The block of docs/results.md: the count, the table, the paired differences so far."""
     cells = finished(folder)
-    print(f"{len(cells)} finished cells\n")
-    print(progress_markdown(cells))
+    return (f"Done so far, {len(cells)} of {total} cells (metric, wall time on one thread):\n\n"
+            f"{progress_markdown(cells)}\n\nPaired differences so far (DiffuseBot − each "
+            f"method on the seeds both finished, 95% Student-t interval):\n\n"
+            f"{paired_markdown(cells).strip()}\n")
+
+
+def write_docs(path: Path, block: str) -> None:
+    """Replace the text between the progress markers of ``path`` with ``block``."""
+    start, end = "<!-- standard-progress -->", "<!-- /standard-progress -->"
+    text = path.read_text()
+    if text.count(start) != 1 or text.count(end) != 1:
+        raise SystemExit(f"error: {path} needs one {start} and one {end} line")
+    head, rest = text.split(start)
+    path.write_text(f"{head}{start}\n{block}{end}{rest.split(end, 1)[1]}")
+
+
+if __name__ == "__main__":
+    args = sys.argv[1:]
+    docs = Path(args.pop(args.index("--docs") + 1)) if "--docs" in args else None
+    args = [a for a in args if a != "--docs"]
+    folder = Path(args[0] if args else "benchmarks/state/compare-standard")
+    block = progress_block(folder)
+    if docs:
+        write_docs(docs, block)
+    print(block)
