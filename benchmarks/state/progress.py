@@ -11,20 +11,20 @@ both between FILE's ``<!-- standard-progress -->`` and ``<!-- /standard-progress
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
+from dbtool.compare.cells import read_cell
 from dbtool.compare.labels import method_name, ordered, task_title
-from dbtool.compare.methods import TITLES
+from dbtool.compare.methods import METHODS
 from dbtool.compare.paired import paired_markdown
 from dbtool.sim.task_names import NAMES
 
 
 def finished(folder: Path) -> list[dict]:
     """The ``cell.json`` records of the folder's finished cells."""
-    cells = [json.loads(p.read_text()) for p in sorted(folder.glob("cells/*/cell.json"))]
-    return [c for c in cells if c.get("status") == "done"]
+    cells = [read_cell(d) for d in sorted(folder.glob("cells/*"))]
+    return [c for c in cells if c and c.get("status") == "done"]
 
 
 def progress_markdown(cells: list[dict], seeds: tuple[int, ...] = (0, 1, 2)) -> str:
@@ -32,7 +32,7 @@ def progress_markdown(cells: list[dict], seeds: tuple[int, ...] = (0, 1, 2)) -> 
     by = {(c["method"], c["task"], int(c["seed"])): c for c in cells}
     lines = ["| method | task | " + " | ".join(f"seed {s}" for s in seeds) + " |",
              "| --- | --- |" + " --- |" * len(seeds)]
-    methods = ordered({m for m, _, _ in by}, TITLES)
+    methods = ordered({m for m, _, _ in by}, METHODS)
     tasks = ordered({t for _, t, _ in by}, NAMES)
     for m in methods:
         for t in tasks:
