@@ -430,3 +430,19 @@ def test_a_ray_cluster_without_live_nodes_is_an_error_not_a_hang(monkeypatch):
     with pytest.raises(executors.ExecutorError, match="no live node left \\(2 cells"):
         list(executors._ray(specs, 2, None, poll_s=0.01))
     assert sorted(dead.cancelled) == ["crawling", "gripping"] and DeadCluster.shut
+
+
+def test_a_private_ray_instance_runs_cells_at_the_callers_priority():
+    """Ray lowers its workers to nice 15 by default: beside another busy process of the same
+    session (a second pytest worker, a notebook) its cells would wait. A private instance keeps
+    the caller's priority, like the local executor."""
+    code = ("import os\n"
+            "from dbtool.compare.executors import connect_ray\n"
+            "ray = connect_ray(1, None)\n"
+            "print(os.nice(0), ray.get(ray.remote(lambda: os.nice(0)).remote()))\n"
+            "ray.shutdown()\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300)
+    assert res.returncode == 0, res.stderr[-3000:]
+    caller, worker = res.stdout.split()[-2:]
+    assert worker == caller

@@ -111,7 +111,9 @@ def check_address(address: str | None, timeout: float = 5.0) -> None:
 
 def connect_ray(workers: int, address: str | None):
     """Join the cluster at ``address`` (``auto``: the one ``ray start`` runs here) or start a
-    private local instance with ``workers`` CPUs."""
+    private local instance with ``workers`` CPUs. A private instance runs its cells at the
+    caller's priority, as the local executor does: Ray's default lowers its workers to nice 15,
+    which starves them beside any other busy process of the same session."""
     ray = ray_module()
     check_address(address)
     if ray.is_initialized():
@@ -122,7 +124,7 @@ def connect_ray(workers: int, address: str | None):
         if address:
             ray.init(address=address, **kwargs)
         else:
-            ray.init(num_cpus=workers, **kwargs)
+            ray.init(num_cpus=workers, _system_config={"worker_niceness": 0}, **kwargs)
     except (ConnectionError, RuntimeError, ValueError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ExecutorError(f"cannot connect to Ray at {address or 'a local instance'}: "
