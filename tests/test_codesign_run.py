@@ -144,6 +144,13 @@ def _small_preset(name: str, task: str):
                     sample_steps=16), replace(cod, dt=200))
 
 
+def test_a_run_records_its_priors_guidance_interval(prior, tmp_path, monkeypatch):
+    """A prior whose weights limit guidance to some steps (version 3: t <= 400) runs a different
+    sampler: the run's config says which steps were guided."""
+    monkeypatch.setattr(prior, "guidance_interval", (0, 400))
+    assert DesignRun(tmp_path, _settings(), prior).config()["prior_guidance_interval"] == [0, 400]
+
+
 class Interrupt(KeyboardInterrupt):
     pass
 
@@ -167,6 +174,7 @@ def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp
     config = json.loads((tmp_path / "a" / "config.json").read_text())
     man = json.loads((tmp_path / "a" / "manifest.json").read_text())
     assert man["config_hash"] == config_hash(config)
+    assert config["prior_guidance_interval"] is None  # version 1 guides every step
     # the code's commit: a checkout's HEAD, None for an installed package (as CI runs it)
     assert (man["commit"], man["dirty"]) == tuple(git_commit().values())
     rows = [json.loads(line) for line in (tmp_path / "a" / "metrics.jsonl").open()]

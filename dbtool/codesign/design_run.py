@@ -175,8 +175,12 @@ class DesignRun:
 
     # ------------------------------------------------------------------ files
     def config(self) -> dict:
+        """Settings, both configs, and the prior's guidance interval (from its weights folder,
+        docs/method.md §1; ``None``: guidance on every step)."""
+        gi = getattr(self.prior, "guidance_interval", None)
         return {"command": "design", "method": "diffusebot", "settings": asdict(self.settings),
-                "embedding": asdict(self.emb_cfg), "codesign": asdict(self.cod_cfg)}
+                "embedding": asdict(self.emb_cfg), "codesign": asdict(self.cod_cfg),
+                "prior_guidance_interval": list(gi) if gi else None}
 
     def start(self, device: str) -> None:
         """Create the run directory (refusing to overwrite another run)."""
