@@ -4,9 +4,10 @@ usage: python benchmarks/state/progress.py [DIR] [--docs FILE]
        (default DIR benchmarks/state/compare-standard)
 
 One row per (method, task) with a finished cell: the metric and the wall time on one thread
-per seed, read from each cell's ``cell.json``; then the paired differences DiffuseBot − each
-method over the seeds both finished (``dbtool/compare/paired.py``). ``--docs FILE`` writes
-both between FILE's ``<!-- standard-progress -->`` and ``<!-- /standard-progress -->`` lines.
+per seed, read from each cell's ``cell.json``; while cells are missing, then the paired
+differences DiffuseBot − each method over the seeds both finished (``dbtool/compare/paired.py``).
+``--docs FILE`` writes the block between FILE's ``<!-- standard-progress -->`` and
+``<!-- /standard-progress -->`` lines.
 """
 
 from __future__ import annotations
@@ -45,8 +46,12 @@ def progress_markdown(cells: list[dict], seeds: tuple[int, ...] = (0, 1, 2)) -> 
 
 
 def progress_block(folder: Path, total: int = 108) -> str:
-    """The block of docs/results.md: the count, the table, the paired differences so far."""
+    """The block of docs/results.md: the count and the table; while cells are missing, also
+    the paired differences so far (once all are done they are the report's ``paired.md``)."""
     cells = finished(folder)
+    if len(cells) >= total:
+        return (f"Per seed, all {total} cells (metric, wall time on one thread):\n\n"
+                f"{progress_markdown(cells)}\n")
     return (f"Done so far, {len(cells)} of {total} cells (metric, wall time on one thread):\n\n"
             f"{progress_markdown(cells)}\n\nPaired differences so far (DiffuseBot − each "
             f"method on the seeds both finished, 95% Student-t interval):\n\n"
