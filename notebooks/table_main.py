@@ -47,7 +47,7 @@ if QUICK:
     TASKS, SEEDS, BUDGET = ("crawling", "gripping"), (0,), "smoke"
 else:
     TASKS, SEEDS, BUDGET = tuple(ALL_TASKS), (0, 1), "smoke"
-COMMITTED = Path("../docs/results/compare-quick")
+COMMITTED = (Path("../docs/results/compare-quick"), Path("../docs/results/compare-standard"))
 print(f"tasks {', '.join(TASKS)}; seeds {SEEDS}; budget {BUDGET!r}")
 
 # %% [markdown]
@@ -86,21 +86,28 @@ print(f"  DiffuseBot on {TASKS[0]}: {plan['epochs']} embedding epoch(s) of "
       f"of {plan['langevin_steps']} Langevin step(s); planned {plan['planned_units']:g} units")
 
 # %% [markdown]
-# ## The committed table (`quick` budget)
+# ## The committed tables (`quick` and `standard` budgets)
 #
-# `docs/results/compare-quick/` holds the comparison on the `quick` budget (100-step episodes)
-# as `dbtool compare` wrote it: `results.csv`, the table and the bar chart.
+# `docs/results/compare-quick/` holds the comparison on the `quick` budget (20 units per cell)
+# and `docs/results/compare-standard/` the one on the `standard` budget (100 units per cell,
+# seeds 0, 1, 2), as `dbtool compare` wrote them: `results.csv`, the table, the bar chart and,
+# for `standard`, the paired differences DiffuseBot − each method with their verdicts and the
+# anytime curves (best metric found against units spent).
 
 # %%
-committed_csv = COMMITTED / "results.csv"
-if committed_csv.is_file():
-    committed = read_results(committed_csv)
-    display(Markdown(table_markdown(committed)))
-    if (COMMITTED / "bars.png").is_file():
-        display(Image(str(COMMITTED / "bars.png")))
-else:
-    display(Markdown(f"*No committed comparison yet: `{committed_csv}` does not exist. Make it "
-                     "with `dbtool compare --budget quick --out docs/results/compare-quick`.*"))
+for folder in COMMITTED:
+    committed_csv = folder / "results.csv"
+    display(Markdown(f"### `{folder.name}`"))
+    if not committed_csv.is_file():
+        display(Markdown(f"*No committed comparison: `{committed_csv}` does not exist. Make it "
+                         f"with `dbtool compare --out docs/results/{folder.name}`.*"))
+        continue
+    display(Markdown(table_markdown(read_results(committed_csv))))
+    for name in ("bars.png", "anytime.png"):
+        if (folder / name).is_file():
+            display(Image(str(folder / name)))
+    if (folder / "paired.md").is_file():
+        display(Markdown((folder / "paired.md").read_text()))
 
 # %% [markdown]
 # ## A fresh comparison
