@@ -169,26 +169,20 @@ def test_a_method_that_does_not_read_the_seed_runs_once_per_task(serial_run, tmp
         a, b = make(m, task, seed=0), make(m, task, seed=3)
         same = all(torch.equal(p, q) for p, q in zip(a.parameters(), b.parameters(), strict=True))
         assert same == (not seeded(m)), m
-    out = tmp_path / "seeds"
+    out = tmp_path / "seeds"  # seeds 1 and 2 without 0: the run of seed 1 is the one copied
     res = _compare("--budget", "smoke", "--tasks", TASK, "--methods", "particle",
-                   "--seeds", "0", "1", "2", "--out", str(out))
+                   "--seeds", "1", "2", "--out", str(out))
     assert res.returncode == 0, res.stderr[-3000:]
-    assert "3 cells, 0 finished, 1 to run on serial, 2 to copy" in res.stdout
+    assert "2 cells, 0 finished, 1 to run on serial, 1 to copy" in res.stdout
     rows = _rows(out)
     assert len({tuple(v[3:]) for v in _same(rows).values()}) == 1
-    assert [r["worker"] for r in rows[1:]] == [f"copy of particle-{TASK}-s0"] * 2
+    assert rows[1]["worker"] == f"copy of particle-{TASK}-s1"
     rec = json.loads((_cell(out, "particle", TASK, 2) / "cell.json").read_text())
-    assert rec["seed"] == 2 and rec["copied_from"] == f"particle-{TASK}-s0"
+    assert rec["seed"] == 2 and rec["copied_from"] == f"particle-{TASK}-s1"
     for name in CELL_FILES:
         assert (_cell(out, "particle", TASK, 2) / name).stat().st_size > 0
-    alone = tmp_path / "alone"
-    res = _compare("--budget", "smoke", "--tasks", TASK, "--methods", "particle",
-                   "--seeds", "1", "--out", str(alone))
-    assert res.returncode == 0, res.stderr[-3000:]
-    assert _same(_rows(alone)) == {k: v for k, v in _same(rows).items() if k[2] == "1"}
-    assert _rows(alone)[0]["metric"] == _same(_rows(serial_run[0]))[
-        ("particle", TASK, "0")][4]
-
+    # seed 1 ran on its own and gives the serial run's seed-0 numbers
+    assert rows[0]["metric"] == _same(_rows(serial_run[0]))[("particle", TASK, "0")][4]
 
 def _children(pid: int) -> set[int]:
     out = set()
