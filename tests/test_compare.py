@@ -184,6 +184,7 @@ def test_a_method_that_does_not_read_the_seed_runs_once_per_task(serial_run, tmp
     # seed 1 ran on its own and gives the serial run's seed-0 numbers
     assert rows[0]["metric"] == _same(_rows(serial_run[0]))[("particle", TASK, "0")][4]
 
+
 def _children(pid: int) -> set[int]:
     out = set()
     for stat in Path("/proc").glob("[0-9]*/stat"):
