@@ -67,7 +67,8 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
         raise PathError(f"cannot write to {path.parent}")
     if path.exists() and not path.is_dir():
         raise NotAFolderError(f"{path} is a file, not a folder")
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.partial-", dir=path.parent))
+    tmp = Path(tempfile.mkdtemp(prefix=f"{partial_prefix(path)}{os.getpid()}-",
+                                dir=path.parent))
     try:
         os.chmod(tmp, 0o777 & ~_umask())
         yield tmp
@@ -81,6 +82,45 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def partial_prefix(path: str | Path) -> str:
+    """The name prefix of :func:`atomic_folder`'s temporary folders for ``path``; the writer's
+    process id follows it."""
+    return f".{Path(path).name}.partial-"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def stale_partials(path: str | Path) -> list[Path]:
+    """The temporary folders of :func:`atomic_folder` for ``path`` (and the replaced folders it
+    renames aside) whose writing process is no longer running: left by a kill or a crash."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        return []
+    found = []
+    for prefix in (partial_prefix(path), f".{path.name}.old-"):
+        for p in path.parent.glob(f"{prefix}*"):
+            pid = p.name[len(prefix):].split("-")[0]
+            if p.is_dir() and (not pid.isdigit() or not _alive(int(pid))):
+                found.append(p)
+    return sorted(found)
+
+
+def clean_stale_partials(path: str | Path) -> list[Path]:
+    """Remove :func:`stale_partials` of ``path``; returns what was removed."""
+    gone = stale_partials(path)
+    for p in gone:
+        shutil.rmtree(p, ignore_errors=True)
+    return gone
 
 
 def check_writable(path: str | Path, folder: bool = False) -> Path:

@@ -26,6 +26,7 @@ KINDS = {"run": "a design run (holding design.npz)", "design": "a design file (.
 def path_kind(path: str | Path) -> str:
     """Which of :data:`KINDS` PATH is, checked before any work: a missing, unreadable or
     unknown PATH is a one-line error."""
+    from dbtool.export.complete import check_complete
     from dbtool.export.reports.page import is_export
 
     path = Path(path)
@@ -35,6 +36,7 @@ def path_kind(path: str | Path) -> str:
         raise PathError(f"{path} cannot be read (permission denied)")
     if path.is_dir():
         if is_export(path):
+            check_complete(path)
             return "export"
         if (path / "compare.json").is_file():
             return "comparison"

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
 import random
+import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -11,6 +14,7 @@ import numpy as np
 
 from dbtool.atomic import atomic_write_text
 from dbtool.errors import InputError
+from dbtool.lock import LOCK_NAME
 from dbtool.provenance import json_default, provenance
 
 
@@ -71,23 +75,158 @@ def write_json(path: Path, obj) -> Path:
     return atomic_write_text(path, json.dumps(obj, indent=2, default=json_default))
 
 
-def manifest(seed: int, device: str, config: dict | None = None) -> dict:
+def manifest(seed: int, device: str, config: dict | None = None, kind: str | None = None
+             ) -> dict:
     """Seed and device of a run, after its provenance (commit and dirty flag, hash of the
     resolved ``config``, time stamp, machine and versions; :func:`dbtool.provenance.provenance`,
-    less the config itself, which ``config.json`` holds)."""
+    less the config itself, which ``config.json`` holds), and the run's ``kind`` (the command
+    that made it: :func:`folder_kind` reads it back)."""
     prov = provenance({} if config is None else config)
     del prov["config"]
-    return {**prov, "seed": seed, "device": device}
+    return {**prov, **({"kind": kind} if kind else {}), "seed": seed, "device": device}
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        obj = json.loads(path.read_text())
+        return obj if isinstance(obj, dict) else {}
+    except (OSError, ValueError):
+        return {}
+
+
+def folder_kind(path: str | Path) -> str | None:
+    """The kind of dbtool run in the folder ``path`` (``design``, ``simulate``, ``compare``,
+    ``realgap-replay``, ...): its manifest's ``kind``, else its config's ``command``, else
+    ``compare`` for a comparison folder; ``None`` for a folder no dbtool run made."""
+    path = Path(path)
+    kind = _read_json(path / "manifest.json").get("kind")
+    if isinstance(kind, str):
+        return kind
+    command = _read_json(path / "config.json").get("command")
+    if isinstance(command, str):
+        return command
+    if (path / "compare.json").is_file():
+        return "compare"
+    config = _read_json(path / "config.json")
+    if config.get("kind") in ("base", "upsampler") and "lr" in config:
+        return "prior-train"  # a training run of the prior (its config is the TrainConfig)
+    return None
+
+
+def _entries(path: Path) -> list[str]:
+    """The folder's entries, less a lock file (a crashed run's stale lock is no content)."""
+    return sorted(n for n in os.listdir(path) if n != LOCK_NAME)
+
+
+def check_run_dir(path: str | Path, kind: str, own: bool = True, option: str = "--run-dir"
+                  ) -> Path:
+    """Check, without writing anything, that a ``kind`` run may be written to ``path``: a new
+    or empty folder, or (``own``) a folder holding a run of the same kind. Anything else (a
+    file, another kind of run, a folder of the user's) raises :class:`RunFolderError`."""
+    from dbtool.atomic import check_writable
+
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise RunFolderError(f"{option} {path} is a file, not a folder")
+    if path.is_dir() and _entries(path):
+        found = folder_kind(path)
+        if found is None:
+            raise RunFolderError(f"{option} {path} is not empty and holds no dbtool run; choose "
+                                 "a new or empty folder")
+        if found != kind:
+            raise RunFolderError(f"{option} {path} holds a {found} run, not a {kind} run; "
+                                 "choose a new or empty folder")
+        if not own:
+            raise RunFolderError(f"{option} {path} already holds a {kind} run; choose a new "
+                                 "or empty folder")
+    check_writable(path, folder=True)
+    return path
+
+
+class RunFolderError(InputError):
+    """A folder that a run may not be written to."""
+
+
+class RunFolder:
+    """A run folder this process writes: checked (:func:`check_run_dir`), created and locked
+    (:class:`~dbtool.lock.FolderLock`) until :meth:`release` or :meth:`abandon`.
+
+    Example::
+
+        folder = RunFolder("runs/simulate-x", "simulate")
+        try:
+            ...  # write files into folder.path
+        except BaseException:
+            folder.abandon()  # what this process created goes; the rest stays
+            raise
+        folder.release()
+    """
+
+    def __init__(self, path: str | Path, kind: str, own: bool = True,
+                 option: str = "--run-dir") -> None:
+        from dbtool.lock import FolderLock, stale_note
+
+        self.path = check_run_dir(path, kind, own, option)
+        self.kind = kind
+        self.made = [p for p in (self.path, *self.path.parents) if not p.exists()]
+        self.path.mkdir(parents=True, exist_ok=True)
+        self.lock = FolderLock(self.path / LOCK_NAME, self.path)
+        try:
+            self.lock.acquire()
+            check_run_dir(self.path, kind, own, option)  # again, now that no one else writes
+        except BaseException:
+            self.lock.release()
+            self._remove_made()
+            raise
+        note = stale_note(self.lock)
+        if note:
+            print(note, file=sys.stderr)
+        self.before = set(_entries(self.path))
+
+    def release(self) -> None:
+        """Unlock the folder (its files stay)."""
+        self.lock.release()
+
+    def abandon(self) -> None:
+        """Remove what this process added to the folder (and the folder itself, and the folders
+        above it, where this process made them), then unlock it: a run that failed or was
+        interrupted before it saved any work leaves nothing behind."""
+        if self.path.is_dir():
+            for name in set(_entries(self.path)) - self.before:
+                p = self.path / name
+                if p.is_dir() and not p.is_symlink():
+                    shutil.rmtree(p, ignore_errors=True)
+                else:
+                    p.unlink(missing_ok=True)
+        self.lock.release()
+        self._remove_made()
+
+    def _remove_made(self) -> None:
+        for p in self.made:  # innermost first; only while empty
+            try:
+                p.rmdir()
+            except OSError:
+                break
 
 
 class RunDir:
-    """A run directory with ``config.json``, ``manifest.json`` and ``metrics.jsonl``."""
+    """A run directory with ``config.json``, ``manifest.json`` and ``metrics.jsonl``, claimed
+    for this process (:class:`RunFolder`: a new or empty folder or a run of the same ``kind``,
+    locked until :meth:`close`). A new run starts an empty ``metrics.jsonl``."""
 
-    def __init__(self, path: str | Path, config: dict, seed: int, device: str) -> None:
-        self.path = Path(path)
-        self.path.mkdir(parents=True, exist_ok=True)
-        write_json(self.path / "config.json", config)
-        write_json(self.path / "manifest.json", manifest(seed, device, config))
+    def __init__(self, path: str | Path, config: dict, seed: int, device: str,
+                 kind: str = "run", keep_metrics: bool = False, option: str = "--out",
+                 own: bool = True) -> None:
+        self.folder = RunFolder(path, kind, own, option)
+        self.path = self.folder.path
+        try:
+            write_json(self.path / "config.json", config)
+            write_json(self.path / "manifest.json", manifest(seed, device, config, kind))
+            if not keep_metrics:
+                atomic_write_text(self.path / "metrics.jsonl", "")
+        except BaseException:
+            self.folder.abandon()
+            raise
 
     def log(self, **metrics) -> None:
         with open(self.path / "metrics.jsonl", "a") as fh:
@@ -95,3 +234,17 @@ class RunDir:
 
     def file(self, name: str) -> Path:
         return self.path / name
+
+    def close(self, ok: bool = True) -> None:
+        """Unlock the folder; ``ok=False`` (the run failed before its results): remove what it
+        wrote (:meth:`RunFolder.abandon`)."""
+        if ok:
+            self.folder.release()
+        else:
+            self.folder.abandon()
+
+    def __enter__(self) -> RunDir:
+        return self
+
+    def __exit__(self, exc_type, *exc: object) -> None:
+        self.close(ok=exc_type is None)

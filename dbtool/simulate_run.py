@@ -97,16 +97,16 @@ def simulate_run(cfg: SimulateConfig, out: str | Path | None = None,
         robot = reference_robot(task, cfg.shape).compact()
     seed_everything(cfg.seed)
     actions = _actions(cfg, task, design)
-    run = RunDir(out or default_run_dir("simulate", task.name), cfg.resolved(), cfg.seed,
-                 runtime.device())
-    start = time.perf_counter()
-    ro = simulate(task, robot, actions, n_steps=cfg.steps, progress=progress)
-    seconds = time.perf_counter() - start
-    particles = len(ro.episode.particles.x0)
-    run.log(task=task.name, metric=ro.metric, particles=particles, seconds=seconds)
-    png = montage(ro.episode, ro.positions, run.file("montage.png"),
-                  title=f"{task.title}: metric {ro.metric:.4f}")
-    gif = animation(ro.episode, ro.positions, run.file("rollout.gif")) if cfg.gif else None
+    with RunDir(out or default_run_dir("simulate", task.name), cfg.resolved(), cfg.seed,
+                runtime.device(), kind="simulate") as run:
+        start = time.perf_counter()
+        ro = simulate(task, robot, actions, n_steps=cfg.steps, progress=progress)
+        seconds = time.perf_counter() - start
+        particles = len(ro.episode.particles.x0)
+        run.log(task=task.name, metric=ro.metric, particles=particles, seconds=seconds)
+        png = montage(ro.episode, ro.positions, run.file("montage.png"),
+                      title=f"{task.title}: metric {ro.metric:.4f}")
+        gif = animation(ro.episode, ro.positions, run.file("rollout.gif")) if cfg.gif else None
     return SimulateResult(task, ro.metric, particles, seconds, run.path, png, gif)
 
 

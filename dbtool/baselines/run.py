@@ -82,22 +82,22 @@ def particle_run(cfg: ParticleRunConfig, out: str | Path | None = None,
     runtime.init(arch=cfg.arch)
     seed_everything(cfg.seed)
     run = RunDir(out or default_run_dir("design", task.name), cfg.resolved(), cfg.seed,
-                 runtime.device())
+                 runtime.device(), kind="design", option="--run-dir", own=False)
+    with run:
+        def log(k: int, metric: float, _design) -> None:
+            run.log(iteration=k, metric=metric)
+            if on_iteration is not None:
+                on_iteration(k, metric)
 
-    def log(k: int, metric: float, _design) -> None:
-        run.log(iteration=k, metric=metric)
-        if on_iteration is not None:
-            on_iteration(k, metric)
-
-    d = optimise(task, reference_robot(task, cfg.shape), cfg.iterations, n_steps=cfg.steps,
-                 callback=log)
-    robot, actions = d.robot(), d.actions
-    ro = simulate(task, robot.compact(), actions, n_steps=cfg.steps)
-    run.log(iteration=cfg.iterations, metric=ro.metric, final=True)
-    result = Design(task.name, robot, actions, metrics={task.name: ro.metric},
-                    meta={"method": "particle-baseline", "seed": cfg.seed,
-                          "iterations": cfg.iterations, "start_shape": cfg.shape})
-    path = result.save(run.file("design.npz"))
-    png = montage(ro.episode, ro.positions, run.file("montage.png"),
-                  title=f"{task.title}: metric {ro.metric:.4f}")
+        d = optimise(task, reference_robot(task, cfg.shape), cfg.iterations, n_steps=cfg.steps,
+                     callback=log)
+        robot, actions = d.robot(), d.actions
+        ro = simulate(task, robot.compact(), actions, n_steps=cfg.steps)
+        run.log(iteration=cfg.iterations, metric=ro.metric, final=True)
+        result = Design(task.name, robot, actions, metrics={task.name: ro.metric},
+                        meta={"method": "particle-baseline", "seed": cfg.seed,
+                              "iterations": cfg.iterations, "start_shape": cfg.shape})
+        path = result.save(run.file("design.npz"))
+        png = montage(ro.episode, ro.positions, run.file("montage.png"),
+                      title=f"{task.title}: metric {ro.metric:.4f}")
     return ParticleRunResult(task.name, ro.metric, run.path, path, png)

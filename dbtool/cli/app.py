@@ -6,15 +6,16 @@ from pathlib import Path
 
 import typer
 
-from dbtool.cli.common import ProgressBar, guarded
+from dbtool.cli.common import OneLineErrors, ProgressBar, command_line, guarded
 from dbtool.cli.compare import compare_command
 from dbtool.cli.export import export_command
 from dbtool.cli.prior import prior_app
 from dbtool.cli.realgap import realgap_app
 from dbtool.codesign.config import PROMPT_T_MIN
+from dbtool.inputs import MAX_SEED, MAX_STEPS
 from dbtool.sim.task_names import NAMES
 
-app = typer.Typer(add_completion=False, no_args_is_help=True,
+app = typer.Typer(cls=OneLineErrors, add_completion=False, no_args_is_help=True,
                   help="dbtool: breed soft robots with a diffusion prior and a differentiable "
                        "MPM simulator (DiffuseBot).")
 TASK_NAMES = ", ".join(NAMES)
@@ -47,8 +48,9 @@ def simulate(
     design: Path = typer.Option(None, help="a saved design (.npz) instead of a reference body"),
     controller: str = typer.Option("prescribed", help="prescribed | none | design"),
     out: Path = typer.Option(None, help="run directory (default runs/simulate-TASK-TIME)"),
-    steps: int = typer.Option(100, min=1, help="control steps (the paper uses 100)"),
-    seed: int = typer.Option(0, help="seed for numpy, torch and Python"),
+    steps: int = typer.Option(100, min=1, max=MAX_STEPS,
+                              help="control steps (the paper uses 100)"),
+    seed: int = typer.Option(0, min=0, max=MAX_SEED, help="seed for numpy, torch and Python"),
     arch: str = typer.Option("cpu", help="cpu | cuda | auto"),
     gif: bool = typer.Option(True, help="also write an animated GIF"),
 ) -> None:
@@ -74,19 +76,23 @@ def design(
     prompt: str = typer.Option(None, help="text feedback composed with the optimised "
                                           "embedding, e.g. 'a star' (docs/method.md §6)"),
     prompt_guidance: float = typer.Option(3.0, help="guidance weight of --prompt"),
-    prompt_t_min: int = typer.Option(PROMPT_T_MIN, min=0, help="--prompt guides the diffusion "
-                                     "steps with t >= this (0: every step)"),
+    prompt_t_min: int = typer.Option(PROMPT_T_MIN, min=0, max=1024,
+                                     help="--prompt guides the diffusion steps with t >= this "
+                                          "(0: every step)"),
     start: str = typer.Option(None, help="prompt the embedding starts from (default: null)"),
-    seed: int = typer.Option(0, help="seed of the whole run"),
-    epochs: int = typer.Option(None, min=0, help="embedding epochs (default: the preset's)"),
-    samples: int = typer.Option(None, min=1, help="co-designed samples (default: preset's)"),
+    seed: int = typer.Option(0, min=0, max=MAX_SEED, help="seed of the whole run"),
+    epochs: int = typer.Option(None, min=0, max=10_000,
+                               help="embedding epochs (default: the preset's)"),
+    samples: int = typer.Option(None, min=1, max=10_000,
+                                help="co-designed samples (default: preset's)"),
     kappa: float = typer.Option(None, min=0, help="physics weight (default: Table 5's)"),
-    steps: int = typer.Option(100, min=1, help="control steps per episode"),
+    steps: int = typer.Option(100, min=1, max=MAX_STEPS, help="control steps per episode"),
     run_dir: Path = typer.Option(None, "--run-dir",
                                  help="run directory (default runs/design-TASK-TIME)"),
     resume: Path = typer.Option(None, help="continue the run in this directory"),
     method: str = typer.Option("diffusebot", help="diffusebot | particle (the baseline)"),
-    iterations: int = typer.Option(4, min=0, help="particle baseline: gradient steps"),
+    iterations: int = typer.Option(4, min=0, max=100_000,
+                                   help="particle baseline: gradient steps"),
     arch: str = typer.Option("cpu", help="cpu | cuda | auto"),
     report: bool = typer.Option(True, "--report/--no-report",
                                 help="write report.html (docs/viewing.md)"),
@@ -99,6 +105,7 @@ def design(
     from dbtool.cli.common import particle_design
     from dbtool.codesign.design_run import Settings
     from dbtool.codesign.launch import open_design_run
+    from dbtool.prior.sampling.generate import far_prompt_note
     from dbtool.sim.tasks import get_task
 
     with guarded():
@@ -108,6 +115,10 @@ def design(
                                        prompt_guidance, samples, kappa, None, steps,
                                        prompt_t_min=prompt_t_min, prior=prior), run_dir, resume,
                               arch)
+        for text in filter(None, (run.settings.prompt, run.settings.start)):
+            note = far_prompt_note(text, getattr(run.prior, "corpus", 1))
+            if note:
+                typer.echo(note, err=True)
         if resume is not None:
             part = run.state.partial
             typer.echo(f"resuming {resume} at epoch {run.state.epoch}, "
@@ -117,8 +128,14 @@ def design(
         try:
             result = run.run(show_progress=True, report=report)
         except KeyboardInterrupt:
-            typer.echo(f"interrupted; continue with: dbtool design {run.settings.task} "
-                       f"--resume {run.path}", err=True)
+            if run.saved_work():
+                typer.echo(f"interrupted; continue with: dbtool design {run.settings.task} "
+                           f"--resume {run.path}", err=True)
+            else:
+                typer.echo("interrupted before the first checkpoint: nothing to resume (the "
+                           "run folder was removed); start again with: "
+                           f"{command_line(f'dbtool design {run.settings.task}')}",
+                           err=True)
             raise typer.Exit(code=130) from None
     metric = result.metrics[run.task.name]
     typer.echo(f"{run.task.name}: final metric = {metric:.6f} "
@@ -201,11 +218,12 @@ def robotize(
 @app.command()
 def generate(
     prompts: list[str] = typer.Argument(..., help="one or more text prompts, e.g. \"a star\""),
-    n: int = typer.Option(8, "-n", min=1, help="samples per prompt"),
+    n: int = typer.Option(8, "-n", min=1, max=10_000, help="samples per prompt"),
     guidance: float = typer.Option(3.0, help="classifier-free guidance scale (Point-E uses 3)"),
-    steps: int = typer.Option(64, min=1, help="sampling steps (strided over the 1,024)"),
+    steps: int = typer.Option(64, min=1, max=1024,
+                              help="sampling steps (strided over the 1,024)"),
     eta: float = typer.Option(1.0, min=0.0, max=1.0, help="1: strided DDPM, 0: DDIM"),
-    seed: int = typer.Option(0, help="seed of the initial noise"),
+    seed: int = typer.Option(0, min=0, max=MAX_SEED, help="seed of the initial noise"),
     upsample: bool = typer.Option(False, "--upsample", help="densify to 4,096 points"),
     base: Path = typer.Option(None, help="base model weights (default: the shipped ones)"),
     upsampler: Path = typer.Option(None, help="upsampler weights (default: the shipped ones)"),

@@ -3,12 +3,19 @@ particle baseline's design run, which ``dbtool design`` hands over to)."""
 
 from __future__ import annotations
 
+import shlex
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 import typer
+from typer.core import TyperGroup
+
+try:  # typer >= 0.23 carries its own copy of click
+    from typer._click import exceptions as _click_errors
+except ImportError:  # pragma: no cover - an older typer on click
+    from click import exceptions as _click_errors
 
 from dbtool.errors import DbtoolError
 
@@ -32,6 +39,45 @@ def guarded(*errors: type[BaseException]) -> Iterator[None]:
                 and exc.filename is None and not isinstance(exc, errors):
             raise
         fail(str(exc))
+
+
+def command_line(fallback: str = "dbtool") -> str:
+    """The ``dbtool ...`` command this process runs (``fallback`` when it runs inside another
+    program, such as a test)."""
+    if sys.argv and Path(sys.argv[0]).name in ("dbtool", "__main__.py"):
+        return shlex.join(["dbtool", *sys.argv[1:]])
+    return fallback
+
+
+class OneLineErrors(TyperGroup):
+    """The ``dbtool`` command group: a usage error (an unknown option, a value out of its
+    range, a missing argument) is one ``error:`` line naming the command's ``--help``, and
+    exit code 2, like every other bad input; the help screen still shows without arguments."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True,
+             **extra):
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode, **extra)
+        try:
+            code = super().main(args, prog_name, complete_var, standalone_mode=False,
+                                **extra)
+        except _click_errors.NoArgsIsHelpError as exc:
+            typer.echo(exc.ctx.get_help())
+            sys.exit(0)
+        except _click_errors.UsageError as exc:
+            where = exc.ctx.command_path if exc.ctx is not None else "dbtool"
+            message = " ".join(exc.format_message().split())
+            typer.secho(f"error: {message} (see '{where} --help')", err=True,
+                        fg=typer.colors.RED)
+            sys.exit(2)
+        except _click_errors.ClickException as exc:
+            typer.secho(f"error: {' '.join(exc.format_message().split())}", err=True,
+                        fg=typer.colors.RED)
+            sys.exit(exc.exit_code)
+        except typer.Abort:
+            typer.echo("Aborted!", err=True)
+            sys.exit(1)
+        sys.exit(code if isinstance(code, int) else 0)
 
 
 class ProgressBar:

@@ -9,6 +9,7 @@ import typer
 
 from dbtool.cli.common import guarded
 from dbtool.errors import InputError
+from dbtool.inputs import check_seed
 
 LIST_OPTIONS = ("--tasks", "--methods", "--seeds")
 
@@ -38,11 +39,11 @@ def compare_command(
     seeds: list[int] = typer.Option(None, "--seeds", help="seeds (default: 0)"),
     budget: str = typer.Option(None, help="smoke, quick, standard or paper (default quick)"),
     executor: str = typer.Option("serial", help="serial, local (processes here) or ray"),
-    workers: int = typer.Option(2, help="worker processes (local) or CPUs of a private Ray "
-                                "instance"),
+    workers: int = typer.Option(2, min=1, max=4096, help="worker processes (local) or CPUs of "
+                                "a private Ray instance"),
     address: str = typer.Option(None, help="Ray cluster to join: HOST:PORT or auto"),
-    threads: int = typer.Option(None, help="CPU threads per cell (default 1; part of what "
-                                "makes numbers reproducible)"),
+    threads: int = typer.Option(None, min=1, max=1024, help="CPU threads per cell (default 1; "
+                                "part of what makes numbers reproducible)"),
     out: Path = typer.Option(None, "--out", "-o", help="comparison folder (default "
                              "runs/compare-BUDGET-TIME)"),
     resume: bool = typer.Option(False, help="finish the comparison in --out: skip finished "
@@ -63,7 +64,9 @@ def compare_command(
             methods=list(methods) if methods else base.get("methods", ["all"]),
             seeds=list(seeds) if seeds else base.get("seeds", [0]),
             budget=budget or base.get("budget", "quick"),
-            threads=threads or base.get("threads", 1))
+            threads=threads if threads is not None else base.get("threads", 1))
+        for s in cfg.seeds:
+            check_seed(s, "--seeds")
         out = out or default_run_dir(f"compare-{cfg.budget}")
         res = compare(cfg, out, executor, workers, address, resume, echo=typer.echo)
     typer.echo(f"{res['done']} cells done, {res['failed']} failed, {res['skipped']} already "

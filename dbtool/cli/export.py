@@ -57,6 +57,7 @@ def export_command(
     --stl nor --3mf, writes both."""
     from dbtool.design import Design
     from dbtool.export.assembly import export_design
+    from dbtool.export.complete import ExportFolder
     from dbtool.runs import design_name, find_design
 
     with guarded():
@@ -69,11 +70,10 @@ def export_command(
                            slice=slice_)
         name = design_name(path)
         d = Design.load(path)
-        rep = export_design(d, out / name, cfg)
-        if report:
-            from dbtool.export.reports.page import write_export_page
-
-            write_export_page(out / name)
+        with ExportFolder(path, out / name) as folder:
+            for note in folder.notes:
+                typer.echo(note, err=True)
+            rep = export_design(d, out / name, cfg, page=report)
     sheet = ["tendons.json", "tendons.png", "assembly.md", "exploded.png"] \
         if "tendons" in rep else []
     for f in rep["files"] + ["report.json", "report.md"] + sheet + (

@@ -41,6 +41,7 @@ from dbtool.codesign.config import (
 from dbtool.codesign.embedding import EmbeddingOptimiser, score
 from dbtool.codesign.langevin import ChainState, codesign_sample
 from dbtool.errors import InputError, RunError
+from dbtool.inputs import MAX_STEPS
 from dbtool.sim.tasks import N_STEPS, Task, get_task
 
 FORMAT = "dbtool.run/1"
@@ -112,7 +113,24 @@ class Settings:
     sample_steps: int | None = None  # denoising steps per design; None: the preset's
     prior: int | None = None  # shipped prior version; None: the default (recorded at start)
 
+    def check(self) -> None:
+        """Refuse settings no run can use (:class:`~dbtool.errors.InputError`, one line),
+        before anything is loaded or written."""
+        from dbtool.inputs import check_count, check_finite, check_seed, check_text
+
+        check_seed(self.seed)
+        check_count("steps", self.n_steps, 1, MAX_STEPS)
+        for name, value in (("prompt", self.prompt), ("start", self.start)):
+            if value is not None:
+                check_text(f"--{name}", value)
+        check_finite("--prompt-guidance", self.prompt_guidance)
+        if self.kappa is not None:
+            check_finite("--kappa", self.kappa, low=0.0)
+        if self.gamma is not None:
+            check_finite("gamma", self.gamma, low=0.0)
+
     def configs(self) -> tuple[EmbeddingConfig, CodesignConfig]:
+        self.check()
         if self.preset not in PRESETS:
             raise InputError(f"unknown preset {self.preset!r}; choose one of {', '.join(PRESETS)}")
         emb, cod = preset(self.preset, self.task)
@@ -159,6 +177,7 @@ class DesignRun:
 
     def __init__(self, path: str | Path, settings: Settings, prior=None) -> None:
         self.path = Path(path)
+        self.folder = None  # the locked run folder (start, resume) until close
         self.settings = settings
         self.task = get_task(settings.task)
         self.emb_cfg, self.cod_cfg = settings.configs()
@@ -183,17 +202,46 @@ class DesignRun:
                 "prior_guidance_interval": list(gi) if gi else None}
 
     def start(self, device: str) -> None:
-        """Create the run directory (refusing to overwrite another run)."""
-        from dbtool.runs import manifest, write_json
+        """Create and lock the run directory: a new or empty folder, or a design run that
+        saved no work (no checkpoint, no design); anything else is refused before writing."""
+        from dbtool.runs import RunFolder, manifest, write_json
 
-        if (self.path / CHECKPOINT).exists() or (self.path / "design.npz").exists():
-            raise RunDirectoryError(f"{self.path} already holds a run; use --resume or another "
-                           "--run-dir")
-        self.path.mkdir(parents=True, exist_ok=True)
-        write_json(self.path / "config.json", self.config())
-        write_json(self.path / "manifest.json", manifest(self.settings.seed, device,
-                                                         self.config()))
-        self._write_metrics()
+        self._check_new(self.path)
+        self.folder = RunFolder(self.path, "design")
+        try:
+            self._check_new(self.path)  # again, under the lock
+            write_json(self.path / "config.json", self.config())
+            write_json(self.path / "manifest.json", manifest(self.settings.seed, device,
+                                                             self.config(), "design"))
+            self._write_metrics()
+        except BaseException:
+            self.folder.abandon()
+            raise
+
+    @staticmethod
+    def _check_new(path: Path) -> None:
+        from dbtool.runs import check_run_dir
+
+        if (path / CHECKPOINT).exists() or (path / "design.npz").exists():
+            raise RunDirectoryError(f"{path} already holds a run; use --resume or another "
+                                    "--run-dir")
+        check_run_dir(path, "design")
+
+    def saved_work(self) -> bool:
+        """Whether the run directory holds a checkpoint (``--resume`` can continue it)."""
+        return (self.path / CHECKPOINT).is_file()
+
+    def close(self, ok: bool = True) -> None:
+        """Unlock the run directory. ``ok=False`` (the run failed or was interrupted): a run
+        that saved no checkpoint leaves nothing behind (what it wrote is removed)."""
+        folder = getattr(self, "folder", None)
+        if folder is None:
+            return
+        if ok or self.saved_work():
+            folder.release()
+        else:
+            folder.abandon()
+        self.folder = None
 
     def log(self, **row) -> None:
         self.state.rows.append(row)
@@ -235,6 +283,9 @@ class DesignRun:
             raise RunDirectoryError(f"{path} is not a dbtool run directory (no config.json)")
         if not ck_path.is_file():
             raise RunDirectoryError(f"{path} has no checkpoint to resume from ({CHECKPOINT})")
+        from dbtool.runs import RunFolder
+
+        folder = RunFolder(path, "design", option="--resume")
         try:
             ck = torch.load(ck_path, map_location="cpu", weights_only=True)
             if not isinstance(ck, dict) or ck.get("format") != FORMAT:
@@ -262,10 +313,16 @@ class DesignRun:
             if ck.get("partial") is not None:
                 run.state.partial = ChainState.from_dict(ck["partial"])
         except RunDirectoryError:
+            folder.release()
             raise
         except Exception as exc:  # noqa: BLE001 - any damage gets the same one-line error
+            folder.release()
             raise RunDirectoryError(f"corrupt checkpoint {ck_path} ({exc.__class__.__name__}: "
-                           f"{str(exc)[:80]})") from None
+                                    f"{str(exc)[:80]})") from None
+        except BaseException:
+            folder.release()
+            raise
+        run.folder = folder
         return run
 
     # ------------------------------------------------------------------ work
@@ -280,7 +337,18 @@ class DesignRun:
             pause_after_stops: int | None = None):
         """Finish the run from wherever it stands; returns the final :class:`Design`
         (``report``: also write ``report.html``, :func:`write_run_report`), or None when
-        paused (checkpointed) after ``pause_after_stops`` Langevin stops of this call."""
+        paused (checkpointed) after ``pause_after_stops`` Langevin stops of this call. The
+        directory is unlocked when this returns; a run that stops (an error, Ctrl-C) before
+        its first checkpoint leaves nothing behind (:meth:`close`)."""
+        try:
+            design = self._run(show_progress, report, pause_after_stops)
+        except BaseException:
+            self.close(ok=False)
+            raise
+        self.close()
+        return design
+
+    def _run(self, show_progress: bool, report: bool, pause_after_stops: int | None):
         from tqdm import tqdm
 
         stops_left = [pause_after_stops]

@@ -19,14 +19,18 @@ def open_design_run(settings: Settings, run_dir: str | Path | None = None,
     from dbtool.sim import runtime
 
     if resume is not None:
+        if run_dir is not None:
+            raise RunDirectoryError("give --resume DIR or --run-dir DIR, not both")
         runtime.init(arch=arch)
         run = DesignRun.resume(resume)
         if run.settings.task != settings.task:
             raise RunDirectoryError(f"{resume} is a {run.settings.task} run, not {settings.task}")
         return run
     settings.configs()
+    path = Path(run_dir or default_run_dir("design", settings.task))
+    DesignRun._check_new(path)  # before the prior loads
     runtime.init(arch=arch)
     seed_everything(settings.seed)
-    run = DesignRun(run_dir or default_run_dir("design", settings.task), settings)
+    run = DesignRun(path, settings)
     run.start(runtime.device())
     return run

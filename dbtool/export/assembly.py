@@ -18,6 +18,7 @@ import numpy as np
 from dbtool.atomic import atomic_folder
 from dbtool.design import Design
 from dbtool.errors import InputError
+from dbtool.export.complete import mark_complete
 from dbtool.export.config import INFILLS, Assembly, ExportConfig
 from dbtool.export.geometry.fields import design_fields
 from dbtool.export.geometry.mesh import OccupancyField, finish, write_stl
@@ -109,13 +110,15 @@ def poses(asm: Assembly, cfg: ExportConfig) -> dict:
 
 
 def export_design(design: Design, out_dir: Path, cfg: ExportConfig | None = None,
-                  name: str | None = None) -> dict:
+                  name: str | None = None, page: bool = False) -> dict:
     """Write the parts (STL and/or 3MF, in their print orientation), ``assembly.stl`` (the
     gripper fused, in its own frame), ``tendons.json``, ``tendons.png``, ``assembly.md``,
     ``exploded.png``, ``report.json`` and ``report.md`` into ``out_dir``; returns the report.
 
-    Everything is written into a hidden sibling folder first and renamed into place at the end,
-    so an interrupted export never leaves a folder that looks complete.
+    ``page``: also ``report.html`` (:func:`dbtool.export.reports.page.write_export_page`).
+    Everything is written into a hidden sibling folder first, the completion marker last
+    (:mod:`dbtool.export.complete`), and the folder is renamed into place as a whole, so an
+    interrupted export never leaves a folder that looks complete.
     """
     from dbtool.export.printing.orient import apply_pose
     from dbtool.export.printing.threemf import plate_layout
@@ -157,6 +160,11 @@ def export_design(design: Design, out_dir: Path, cfg: ExportConfig | None = None
             _gripper_files(design, asm, cfg, rep, tmp, name)
         write_json(tmp / "report.json", rep)
         (tmp / "report.md").write_text(report_markdown(rep))
+        if page:
+            from dbtool.export.reports.page import write_export_page
+
+            write_export_page(tmp, name)
+        mark_complete(tmp)
     return rep
 
 

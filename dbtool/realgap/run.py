@@ -24,7 +24,7 @@ from dbtool.realgap.protocol import (
     tendon_groups,
 )
 from dbtool.realgap.report import compare, plot, write_report
-from dbtool.runs import RunDir, default_run_dir, write_json
+from dbtool.runs import RunDir, check_run_dir, default_run_dir, write_json
 from dbtool.sim import runtime
 
 
@@ -58,20 +58,22 @@ def replay(log_path: str | Path, design: str | Path, params: TendonParams | None
     """Simulate the logged schedule on ``design`` and compare: ``sim.csv``, ``report.json``,
     ``report.md`` and ``fig16.png`` in the run folder ``out``."""
     logged = logged or read_log(log_path)
-    out = check_writable(out or default_run_dir("realgap-replay"), folder=True)
+    out = check_run_dir(out or default_run_dir("realgap-replay"), "realgap-replay",
+                        option="--out")
     params = params or TendonParams()
     bench, meta = open_bench(design, config)
     check_design(logged, meta["design"], meta["design_sha"])
     run = RunDir(out, {"log": str(log_path), "design": str(design), "params": asdict(params),
-                       "bench": asdict(bench.cfg)}, 0, runtime.device())
-    simulated = simulate_log(bench, logged.schedule(), params, meta)
-    write_log(run.file("sim.csv"), simulated)
-    report = compare(logged, simulated)
-    report["params"] = asdict(params)
-    write_report(report, out)
-    plot(logged, simulated, run.file("fig16.png"),
-         f"{meta['design']}: logged ({logged.meta.get('source', 'real')}) vs simulated")
-    run.log(rmse_mm=report["overall"]["rmse_mm"])
+                       "bench": asdict(bench.cfg)}, 0, runtime.device(), kind="realgap-replay")
+    with run:
+        simulated = simulate_log(bench, logged.schedule(), params, meta)
+        write_log(run.file("sim.csv"), simulated)
+        report = compare(logged, simulated)
+        report["params"] = asdict(params)
+        write_report(report, out)
+        plot(logged, simulated, run.file("fig16.png"),
+             f"{meta['design']}: logged ({logged.meta.get('source', 'real')}) vs simulated")
+        run.log(rmse_mm=report["overall"]["rmse_mm"])
     return report, out
 
 
@@ -83,26 +85,29 @@ def calibrate_log(log_path: str | Path, design: str | Path, out: str | Path | No
     """Fit the tendon map to a log; writes ``params.json`` (fitted values, standard errors,
     RMSE before and after, history) and the replays before and after in ``out``."""
     logged = logged or read_log(log_path)
-    out = check_writable(out or default_run_dir("realgap-calibrate"), folder=True)
+    out = check_run_dir(out or default_run_dir("realgap-calibrate"), "realgap-calibrate",
+                        option="--out")
     bench, meta = open_bench(design, config)
     check_design(logged, meta["design"], meta["design_sha"])
     run = RunDir(out, {"log": str(log_path), "design": str(design), "fit": list(names),
                        "start": asdict(start or TendonParams()), "max_evals": max_evals,
-                       "bench": asdict(bench.cfg)}, 0, runtime.device())
+                       "bench": asdict(bench.cfg)}, 0, runtime.device(),
+                 kind="realgap-calibrate")
+    with run:
+        def report(h: dict) -> None:
+            run.log(**h)
+            if progress is not None:
+                progress(h)
 
-    def report(h: dict) -> None:
-        run.log(**h)
-        if progress is not None:
-            progress(h)
-
-    cal = calibrate(bench, logged, start, names, max_evals, progress=report)
-    write_json(run.file("params.json"), {**cal.to_json(), "design": meta, "log": str(log_path)})
-    for label, p in (("before", start or TendonParams()), ("after", cal.params)):
-        simulated = simulate_log(bench, logged.schedule(), p, meta, hold=cal.hold)
-        rep = compare(logged, simulated)
-        write_json(run.file(f"report-{label}.json"), rep)
-        plot(logged, simulated, run.file(f"fig16-{label}.png"),
-             f"{meta['design']}: {label} calibration")
+        cal = calibrate(bench, logged, start, names, max_evals, progress=report)
+        write_json(run.file("params.json"),
+                   {**cal.to_json(), "design": meta, "log": str(log_path)})
+        for label, p in (("before", start or TendonParams()), ("after", cal.params)):
+            simulated = simulate_log(bench, logged.schedule(), p, meta, hold=cal.hold)
+            rep = compare(logged, simulated)
+            write_json(run.file(f"report-{label}.json"), rep)
+            plot(logged, simulated, run.file(f"fig16-{label}.png"),
+                 f"{meta['design']}: {label} calibration")
     return cal, out
 
 

@@ -106,8 +106,11 @@ def _part_rows(report: dict) -> dict:
     return rows
 
 
-def write_export_page(folder: str | Path) -> Path:
-    """Write ``folder/report.html`` for an export folder (atomically); returns its path."""
+def write_export_page(folder: str | Path, name: str | None = None) -> Path:
+    """Write ``folder/report.html`` for an export folder (atomically; ``name``: the export's
+    name in the title, default the folder's); returns its path. A finished export's marker
+    then lists the page (:func:`dbtool.export.complete.add_to_marker`)."""
+    from dbtool.export.complete import add_to_marker
     from dbtool.viz.report import render_html
 
     folder = Path(folder)
@@ -119,6 +122,8 @@ def write_export_page(folder: str | Path) -> Path:
              if (folder / name).is_file()}
     images = {name: (folder / name).read_bytes() for name in ("exploded.png", "tendons.png")
               if (folder / name).is_file()}
-    page = render_html(f"dbtool export: {folder.name}", _part_rows(report),
+    page = render_html(f"dbtool export: {name or folder.name}", _part_rows(report),
                        {"assembly": fig} if fig is not None else {}, texts, images)
-    return atomic_write_text(folder / "report.html", page)
+    out = atomic_write_text(folder / "report.html", page)
+    add_to_marker(folder, "report.html")
+    return out

@@ -44,9 +44,16 @@ def slug(prompt: str) -> str:
 
 
 def check_prompts(prompts: list[str]) -> None:
-    """Refuse empty prompts (before any model is loaded)."""
-    if not prompts or any(not p.strip() for p in prompts):
+    """Refuse empty prompts and prompts with control characters (before any model is
+    loaded)."""
+    from dbtool.inputs import check_text
+
+    if not prompts:
         raise InputError("the prompt is empty: say what to generate, e.g. \"a star\"")
+    for p in prompts:
+        if not p.strip():
+            raise InputError("the prompt is empty: say what to generate, e.g. \"a star\"")
+        check_text("the prompt", p)
 
 
 def generate(prior: Prior, prompts: list[str], settings: GenerateSettings, out: Path) -> dict:

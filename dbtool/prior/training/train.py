@@ -310,7 +310,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path
     if ckpt_path.exists() and not resume:
         raise RunExistsError(f"{ckpt_path} exists: pass --resume or choose another --out")
     check_corpus(cfg, run_dir)
-    run = RunDir(run_dir, asdict(cfg), cfg.seed, "cpu")
+    run = RunDir(run_dir, asdict(cfg), cfg.seed, "cpu", kind="prior-train", keep_metrics=True)
     clouds, _labels, table, cap_index, cap_count = load_corpus(
         cfg, cache_dir or run.path.parent / "corpus")
     emb = caption_embeddings(cfg, table, cache_dir or run.path.parent / "corpus") \
@@ -354,6 +354,7 @@ def train(cfg: TrainConfig, run_dir: Path, resume: bool = False, cache_dir: Path
         bar.close()
     result = {"steps": cfg.steps, "elapsed_s": state.elapsed}
     write_json(run.path / "metrics.json", result)
+    run.close()
     return result
 
 
