@@ -138,3 +138,22 @@ def check_writable(path: str | Path, folder: bool = False) -> Path:
     if not folder and path.is_dir():
         raise PathError(f"cannot write {path}: it is a folder")
     return path
+
+
+def check_own_file(path: str | Path, own: Callable[[Path], bool], option: str = "-o") -> Path:
+    """Refuse (one line, before any work) to write ``path`` over a file that ``own(path)``
+    does not recognise as this command's earlier output: a user's file is never replaced."""
+    from dbtool.errors import InputError
+
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{option} {path} is a folder, not a file")
+    if path.exists():
+        try:
+            mine = own(path)
+        except Exception:  # noqa: BLE001 - unreadable: not ours
+            mine = False
+        if not mine:
+            raise InputError(f"{option} {path} already exists and this command did not write "
+                             "it; choose another file name")
+    return path

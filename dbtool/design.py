@@ -138,8 +138,6 @@ def check_design_file(path: str | Path, task: str | None = None) -> Design:
         spec = get_task(header["task"])
     except InputError:
         raise DesignFileError(f"{where} names an unknown task {header['task']!r}") from None
-    if task is not None and get_task(task).name != spec.name:
-        raise DesignFileError(f"{path} was made for task {spec.name!r}, not {task!r}")
     arrays = _real(arrays, where)
     surface, controller, directions = arrays["surface"], arrays["controller"], \
         arrays["directions"]
@@ -174,5 +172,7 @@ def check_design_file(path: str | Path, task: str | None = None) -> Design:
     if controller.ndim != 2 or controller.shape[1] != groups or len(controller) == 0:
         raise DesignFileError(f"{where}: controller shape {controller.shape} does not match "
                               f"{groups} actuator groups and at least one step")
+    if task is not None and get_task(task).name != spec.name:
+        raise DesignFileError(f"{path} was made for task {spec.name!r}, not {task!r}")
     return Design(spec.name, robot, controller, surface, dict(header.get("metrics", {})),
                   dict(header.get("meta", {})))

@@ -107,6 +107,8 @@ def folder_kind(path: str | Path) -> str | None:
         return command
     if (path / "compare.json").is_file():
         return "compare"
+    if (path / "generate.json").is_file():
+        return "generate"
     config = _read_json(path / "config.json")
     if config.get("kind") in ("base", "upsampler") and "lr" in config:
         return "prior-train"  # a training run of the prior (its config is the TrainConfig)
@@ -200,6 +202,15 @@ class RunFolder:
                     p.unlink(missing_ok=True)
         self.lock.release()
         self._remove_made()
+
+    def __enter__(self) -> RunFolder:
+        return self
+
+    def __exit__(self, exc_type, *exc: object) -> None:
+        if exc_type is None:
+            self.release()
+        else:
+            self.abandon()
 
     def _remove_made(self) -> None:
         for p in self.made:  # innermost first; only while empty

@@ -115,28 +115,32 @@ def design(
                                        prompt_guidance, samples, kappa, None, steps,
                                        prompt_t_min=prompt_t_min, prior=prior), run_dir, resume,
                               arch)
-        for text in filter(None, (run.settings.prompt, run.settings.start)):
-            note = far_prompt_note(text, getattr(run.prior, "corpus", 1))
-            if note:
-                typer.echo(note, err=True)
-        if resume is not None:
-            part = run.state.partial
-            typer.echo(f"resuming {resume} at epoch {run.state.epoch}, "
-                       f"{len(run.state.samples)} co-designed samples done"
-                       + ("" if part is None else f", the next one at its stop t = {part.t}"))
-        typer.echo(f"run directory: {run.path}")
         try:
+            for text in filter(None, (run.settings.prompt, run.settings.start)):
+                note = far_prompt_note(text, getattr(run.prior, "corpus", 1))
+                if note:
+                    typer.echo(note, err=True)
+            if resume is not None:
+                part = run.state.partial
+                typer.echo(f"resuming {resume} at epoch {run.state.epoch}, "
+                           f"{len(run.state.samples)} co-designed samples done"
+                           + ("" if part is None else f", the next one at its stop t = {part.t}"))
+            typer.echo(f"run directory: {run.path}")
             result = run.run(show_progress=True, report=report)
         except KeyboardInterrupt:
+            run.close(ok=False)  # a run with no checkpoint leaves nothing behind
             if run.saved_work():
                 typer.echo(f"interrupted; continue with: dbtool design {run.settings.task} "
                            f"--resume {run.path}", err=True)
             else:
-                typer.echo("interrupted before the first checkpoint: nothing to resume (the "
-                           "run folder was removed); start again with: "
+                typer.echo("interrupted before the first checkpoint: nothing to resume (what it "
+                           "wrote was removed); start again with: "
                            f"{command_line(f'dbtool design {run.settings.task}')}",
                            err=True)
             raise typer.Exit(code=130) from None
+        except BaseException:
+            run.close(ok=False)
+            raise
     metric = result.metrics[run.task.name]
     typer.echo(f"{run.task.name}: final metric = {metric:.6f} "
                f"(from {result.meta.get('source', 'co-design')})")
@@ -236,12 +240,13 @@ def generate(
     from dbtool.prior.sampling.generate import GenerateSettings, check_prompts, far_prompt_note
     from dbtool.prior.sampling.generate import generate as run_generate
     from dbtool.prior.sampling.pipeline import Prior
-    from dbtool.runs import default_run_dir
+    from dbtool.runs import check_run_dir, default_run_dir
 
     settings = GenerateSettings(n, guidance, steps, seed, upsample, eta)
     out = out or default_run_dir("generate")
     with guarded():
         check_prompts(prompts)
+        check_run_dir(out, "generate", option="--out")
         prior = Prior.load(base, upsampler if upsample else None, with_upsampler=upsample,
                            version=version)
         for note in filter(None, (far_prompt_note(p, prior.corpus) for p in prompts)):

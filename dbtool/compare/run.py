@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -24,10 +23,11 @@ from pathlib import Path
 
 from dbtool.atomic import atomic_write_text
 from dbtool.compare.budget import get_budget
-from dbtool.compare.cells import CellSpec, copy_cell, read_cell
+from dbtool.compare.cells import CellSpec, copy_cell, read_cell, read_compare_json
 from dbtool.compare.executors import check_executor, execute
 from dbtool.compare.methods import METHODS, seeded
 from dbtool.errors import InputError
+from dbtool.runs import RunFolder
 from dbtool.sim.tasks import TASKS
 
 FORMAT = "dbtool.compare/1"
@@ -86,17 +86,18 @@ def stored_config(out: str | Path) -> dict:
     """Budget and thread count of an existing comparison (``{}`` if ``out`` is none: the
     resume then fails in :func:`prepare` with the reason)."""
     try:
-        meta = json.loads((Path(out) / "compare.json").read_text())
+        meta = read_compare_json(Path(out) / "compare.json", resume=True)
         return {"budget": meta["budget"], "threads": meta["threads"],
                 "tasks": sorted({c[1] for c in meta["cells"]}, key=list(TASKS).index),
                 "methods": sorted({c[0] for c in meta["cells"]}, key=list(METHODS).index),
                 "seeds": sorted({c[2] for c in meta["cells"]})}
-    except (OSError, ValueError, KeyError, TypeError):
+    except (OSError, ValueError, KeyError, TypeError):  # InputError is a ValueError
         return {}
 
 
-def prepare(out: Path, cfg: CompareConfig, resume: bool) -> dict:
-    """Create or reopen the comparison folder; returns its ``compare.json``."""
+def prepare(out: Path, cfg: CompareConfig, resume: bool) -> tuple[dict, RunFolder]:
+    """Create or reopen the comparison folder and lock it (:class:`~dbtool.runs.RunFolder`,
+    until the comparison ends); returns its ``compare.json`` and the locked folder."""
     from dbtool.atomic import check_writable
     from dbtool.provenance import git_commit
     from dbtool.runs import manifest, write_json
@@ -105,29 +106,30 @@ def prepare(out: Path, cfg: CompareConfig, resume: bool) -> dict:
     if resume:
         if not out.is_dir():
             raise CompareError(f"nothing to resume: {out} does not exist")
-        try:
-            meta = json.loads(meta_path.read_text())
-            assert meta.get("format") == FORMAT
-        except (OSError, ValueError, AssertionError):
-            raise CompareError(f"{out} is not a comparison folder (no valid compare.json)"
-                               ) from None
+        if not meta_path.is_file():
+            raise CompareError(f"{out} is not a comparison folder (no compare.json)")
+        meta = read_compare_json(meta_path, resume=True)  # one line on what is wrong
+        for m, t, s in meta["cells"]:  # every record read later, checked before any write
+            read_cell(out / "cells" / f"{m}-{t}-s{s}")
         if meta["budget"] != cfg.budget or meta["threads"] != cfg.threads:
             raise CompareError(f"{out} was run with --budget {meta['budget']} --threads "
                                f"{meta['threads']}; a resume must use the same")
         meta["cells"] = _order(meta["cells"] + [list(c) for c in cfg.cells()])
+        folder = RunFolder(out, "compare", option="--out")
     else:
         if out.exists() and (not out.is_dir() or any(out.iterdir())):
             raise CompareError(f"{out} already exists and is not empty; use --resume or "
                                "another --out")
         check_writable(out, folder=True)
-        out.mkdir(parents=True, exist_ok=True)
+        folder = RunFolder(out, "compare", own=False, option="--out")
         meta = {"format": FORMAT, "budget": cfg.budget, "threads": cfg.threads,
                 "arch": cfg.arch, "budget_settings": get_budget(cfg.budget).as_dict(),
                 "cells": _order([list(c) for c in cfg.cells()])}
-        write_json(out / "manifest.json", {**manifest(0, f"taichi-{cfg.arch}", meta),
-                                           "commit_at_start": git_commit()})
+        write_json(out / "manifest.json", {
+            **manifest(0, f"taichi-{cfg.arch}", meta, "compare"),
+            "commit_at_start": git_commit()})
     write_json(meta_path, meta)
-    return meta
+    return meta, folder
 
 
 def write_results(out: Path, meta: dict) -> list[dict]:
@@ -154,8 +156,6 @@ def compare(cfg: CompareConfig, out: str | Path, executor: str = "serial", worke
             echo: Callable[[str], object] | None = None) -> dict:
     """Run (or finish) the comparison in ``out``; returns ``{"done", "failed", "skipped",
     "report"}``. Cells already ``done`` are skipped."""
-    from dbtool.provenance import commit_tag
-
     try:
         check_executor(executor)
     except ValueError as exc:
@@ -167,7 +167,17 @@ def compare(cfg: CompareConfig, out: str | Path, executor: str = "serial", worke
         check_address(address)  # and so does an unreachable cluster
     echo = echo or (lambda s: print(s, file=sys.stderr, flush=True))
     out = Path(out)
-    meta = prepare(out, cfg, resume)
+    meta, folder = prepare(out, cfg, resume)
+    try:
+        return _compare(cfg, out, meta, executor, workers, address, echo)
+    finally:
+        folder.release()
+
+
+def _compare(cfg: CompareConfig, out: Path, meta: dict, executor: str, workers: int,
+             address: str | None, echo: Callable[[str], object]) -> dict:
+    from dbtool.provenance import commit_tag
+
     tag = commit_tag()
     specs = [CellSpec(m, t, s, meta["budget"], str(out.resolve()), meta["threads"],
                       meta.get("arch", "cpu"), tag) for m, t, s in meta["cells"]]

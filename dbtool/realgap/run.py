@@ -9,13 +9,14 @@ from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
 
-from dbtool.atomic import check_writable
+from dbtool.atomic import check_own_file, check_writable
 from dbtool.realgap.calibrate import FIT, Calibration, calibrate
 from dbtool.realgap.log import TENDONS, TipLog, check_design, read_log, write_log
 from dbtool.realgap.protocol import (
     Bench,
     BenchConfig,
     TendonParams,
+    check_strain,
     design_sha,
     export_scale,
     load_gripper,
@@ -42,6 +43,7 @@ def simulate(design: str | Path, params: TendonParams, out: str | Path, step_mm:
              config: BenchConfig | None = None) -> TipLog:
     """Simulate the protocol on ``design`` and write its log (source: sim) to ``out``."""
     schedule = standard_schedule(step_mm, max_mm, tendons)
+    check_own_file(out, lambda p: read_log(p).source == "sim", "-o")
     check_writable(out)
     bench, meta = open_bench(design, config)
     meta["date"] = time.strftime("%Y-%m-%d")
@@ -63,6 +65,7 @@ def replay(log_path: str | Path, design: str | Path, params: TendonParams | None
     params = params or TendonParams()
     bench, meta = open_bench(design, config)
     check_design(logged, meta["design"], meta["design_sha"])
+    check_strain(bench, logged, params)
     run = RunDir(out, {"log": str(log_path), "design": str(design), "params": asdict(params),
                        "bench": asdict(bench.cfg)}, 0, runtime.device(), kind="realgap-replay")
     with run:
@@ -89,6 +92,7 @@ def calibrate_log(log_path: str | Path, design: str | Path, out: str | Path | No
                         option="--out")
     bench, meta = open_bench(design, config)
     check_design(logged, meta["design"], meta["design_sha"])
+    check_strain(bench, logged, start or TendonParams())
     run = RunDir(out, {"log": str(log_path), "design": str(design), "fit": list(names),
                        "start": asdict(start or TendonParams()), "max_evals": max_evals,
                        "bench": asdict(bench.cfg)}, 0, runtime.device(),

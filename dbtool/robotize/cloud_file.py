@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from dbtool.atomic import check_own_file
 from dbtool.design import Design
 from dbtool.pointcloud import load_ply
 from dbtool.prior.sampling.diffusion import T_TRAIN, noise_std
@@ -21,6 +22,11 @@ class RobotizedFile:
     design: Design
     path: Path
     picture: Path
+
+
+def _robotized(path: Path) -> bool:
+    """Whether ``path`` is a design ``dbtool robotize`` wrote (its method is a robotizer's)."""
+    return Design.load(path).meta.get("method") in ("dpsr", "direct_sdf")
 
 
 def robotize_cloud_file(cloud: str | Path, task_name: str, out: str | Path,
@@ -41,6 +47,8 @@ def robotize_cloud_file(cloud: str | Path, task_name: str, out: str | Path,
     out = Path(out)
     if out.suffix != ".npz":
         raise RobotizeError(f"the output must be a .npz file, got {out}")
+    check_own_file(out, _robotized, "-o")
+    check_own_file(out.with_suffix(".png"), lambda p: _robotized(out), "-o")
     x = load_ply(cloud)
     cfg = cfg or RobotizeConfig()
     rz = robotize(x, task, cfg, noise=noise, method=method)

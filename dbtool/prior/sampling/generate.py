@@ -21,7 +21,7 @@ from dbtool.errors import InputError
 from dbtool.pointcloud import save_npz, save_ply
 from dbtool.prior.sampling.pipeline import Prior
 from dbtool.prior.sampling.schedulers import scheduler_for
-from dbtool.runs import write_json
+from dbtool.runs import RunFolder, check_run_dir, write_json
 from dbtool.viz.clouds import cloud_grid
 
 
@@ -61,33 +61,34 @@ def generate(prior: Prior, prompts: list[str], settings: GenerateSettings, out: 
     check_prompts(prompts)
     if settings.n < 1 or settings.steps < 1:
         raise InputError("-n and --steps must be at least 1")
+    check_run_dir(out, "generate", option="--out")
     t0 = time.perf_counter()
     res = prior.sample(prompts, settings.n, settings.guidance, settings.steps, settings.seed,
                        upsample=settings.upsample,
                        scheduler=scheduler_for(settings.eta, prior.scheduler.schedule))
     seconds = time.perf_counter() - t0
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    labels = [p for p in prompts for _ in range(settings.n)]
-    clouds = res.fine if res.fine is not None else res.clouds
-    names: dict[str, str] = {}  # prompt -> file stem, unique even when two prompts share a slug
-    for p in prompts:
-        stem = slug(p)
-        while stem in names.values():
-            stem += "-x"
-        names.setdefault(p, stem)
-    files = []
-    for k, (p, cloud) in enumerate(zip(labels, clouds, strict=True)):
-        files.append(save_ply(cloud, out / f"{names[p]}-{k % settings.n}.ply"))
-    arrays = {"coarse": res.clouds.astype(np.float32), "prompts": np.array(labels)}
-    if res.fine is not None:
-        arrays["fine"] = res.fine.astype(np.float32)
-    files.append(save_npz(out / "samples.npz", **arrays))
-    files.append(cloud_grid(list(clouds), out / "grid.png", titles=labels,
-                            cols=min(settings.n, 8)))
-    summary = {"prompts": prompts, "settings": settings.__dict__, "seconds": seconds,
-               "points": int(clouds.shape[1]), "files": [str(f) for f in files]}
-    write_json(out / "generate.json", summary)
+    with RunFolder(out, "generate", option="--out"):
+        labels = [p for p in prompts for _ in range(settings.n)]
+        clouds = res.fine if res.fine is not None else res.clouds
+        names: dict[str, str] = {}  # prompt -> file stem, unique even when two prompts share a slug
+        for p in prompts:
+            stem = slug(p)
+            while stem in names.values():
+                stem += "-x"
+            names.setdefault(p, stem)
+        files = []
+        for k, (p, cloud) in enumerate(zip(labels, clouds, strict=True)):
+            files.append(save_ply(cloud, out / f"{names[p]}-{k % settings.n}.ply"))
+        arrays = {"coarse": res.clouds.astype(np.float32), "prompts": np.array(labels)}
+        if res.fine is not None:
+            arrays["fine"] = res.fine.astype(np.float32)
+        files.append(save_npz(out / "samples.npz", **arrays))
+        files.append(cloud_grid(list(clouds), out / "grid.png", titles=labels,
+                                cols=min(settings.n, 8)))
+        summary = {"prompts": prompts, "settings": settings.__dict__, "seconds": seconds,
+                   "points": int(clouds.shape[1]), "files": [str(f) for f in files]}
+        write_json(out / "generate.json", summary)
     return summary
 
 
