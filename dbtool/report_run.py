@@ -12,7 +12,6 @@ report goes next to it (:func:`dbtool.codesign.run_figures.write_run_report`,
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
@@ -55,18 +54,66 @@ def design_file(path: str | Path) -> Path:
     return Path(path) / "design.npz" if kind == "run" else Path(path)
 
 
-def replay(file: Path):
-    """The design saved in ``file`` and its rollout, simulated again with its own
-    controller: ``(design, task, rollout)``."""
-    from dbtool.design import Design
-    from dbtool.sim.rollout import simulate
-    from dbtool.sim.tasks import N_STEPS, get_task
+def load_design(file: str | Path):
+    """The design in ``file`` (:meth:`dbtool.design.Design.load`), with the controller the
+    replay runs checked again: finite, of shape (steps, actuator groups) with 1 to
+    :data:`~dbtool.inputs.MAX_STEPS` steps."""
+    import numpy as np
+
+    from dbtool.design import Design, DesignFileError
+    from dbtool.inputs import MAX_STEPS
 
     design = Design.load(file)
+    c = np.asarray(design.controller)
+    groups = np.asarray(design.robot.actuators).shape[-1]
+    if c.ndim != 2 or c.shape[1] != groups or not 1 <= len(c) <= MAX_STEPS:
+        raise DesignFileError(f"design file {file}: its controller has shape {c.shape}; the "
+                              f"replay needs (steps, {groups}) with 1 to {MAX_STEPS:,} steps")
+    if c.dtype.kind not in "fiu" or not np.isfinite(c).all():
+        raise DesignFileError(f"design file {file}: its controller holds NaN, infinite or "
+                              "non-numeric values")
+    return design
+
+
+def replay(file: Path, design=None):
+    """The design saved in ``file`` (or ``design``, already loaded from it) and its rollout,
+    simulated again with its own controller: ``(design, task, rollout)``."""
+    from dbtool.sim.rollout import simulate
+    from dbtool.sim.tasks import get_task
+
+    design = design if design is not None else load_design(file)
     task = get_task(design.task)
-    ro = simulate(task, design.robot, design.controller,
-                  n_steps=len(design.controller) or N_STEPS)
+    ro = simulate(task, design.robot, design.controller, n_steps=len(design.controller))
     return design, task, ro
+
+
+def run_files(folder: Path) -> list[dict]:
+    """Check what the report of a design reads beside it (``config.json`` and
+    ``manifest.json``: JSON objects; ``metrics.jsonl``: one JSON object a line, the
+    embedding rows with numbers for ``epoch``, ``mean`` and ``max``, the co-design rows with
+    an integer ``sample`` and a number ``metric``) before the rollout is simulated; returns
+    the rows of ``metrics.jsonl``."""
+    from dbtool.jsonfiles import integer, is_finite_number, kind, read_jsonl, read_object
+
+    for name in ("config.json", "manifest.json"):
+        if (folder / name).is_file():
+            read_object(folder / name)
+    log = folder / "metrics.jsonl"
+    rows = read_jsonl(log) if log.is_file() else []
+
+    def real(where: str, value: object) -> None:  # NaN is a legal metric of a failed design
+        if not (is_finite_number(value) or isinstance(value, float)):
+            raise InputError(f"{where} must be a number, not {kind(value)}")
+
+    for n, r in enumerate(rows, 1):
+        where = f"{log}: row {n}"
+        if r.get("phase") == "embedding":
+            for key in ("epoch", "mean", "max"):
+                real(f"{where}: {key}", r.get(key))
+        elif r.get("phase") == "codesign" and "metric" in r and not r.get("final"):
+            integer(f"{where}: sample", r.get("sample"))
+            real(f"{where}: metric", r["metric"])
+    return rows
 
 
 def report_run(path: str | Path) -> Path:
@@ -87,9 +134,7 @@ def report_run(path: str | Path) -> Path:
 
     file = design_file(path)
     check_writable(file.parent / "report.html")
-    design, _task, ro = replay(file)
-    rows = []
-    log = file.parent / "metrics.jsonl"
-    if log.is_file():
-        rows = [json.loads(line) for line in log.read_text().splitlines() if line.strip()]
+    design = load_design(file)
+    rows = run_files(file.parent)
+    design, _task, ro = replay(file, design)
     return write_run_report(file.parent, design, ro, rows)

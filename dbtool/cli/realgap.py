@@ -16,6 +16,12 @@ LOG_HELP = "a tip-distance log (CSV, docs/realgap.md)"
 DESIGN_HELP = "a gripper: run folder, export folder (e.g. exports/gripping-seed0) or design.npz"
 
 
+def warn(lines) -> None:
+    """One ``warning:`` line on stderr for each of ``lines``."""
+    for w in lines:
+        typer.secho(f"warning: {w}", err=True, fg=typer.colors.YELLOW)
+
+
 @realgap_app.command("simulate")
 def realgap_simulate(
     design: Path = typer.Argument(..., help=DESIGN_HELP),
@@ -33,6 +39,7 @@ def realgap_simulate(
 
     with guarded():
         params = TendonParams(gain, stiffness_scale, friction, slack)
+        warn(params.warnings())
         log = simulate(design, params, out, step_mm, max_mm)
     for t, c in log.curves.items():
         typer.echo(f"{t}: tip distance {c.tip[0]:.2f} -> {c.tip.min():.2f}..{c.tip.max():.2f} "
@@ -55,9 +62,10 @@ def realgap_replay(
 
     with guarded():
         logged = read_log(log)
-        report, folder = replay(log, design, load_params(params), out, logged=logged)
-    for w in logged.warnings:
-        typer.secho(f"warning: {w}", err=True, fg=typer.colors.YELLOW)
+        tendon = load_params(params)
+        warn(f"{params}: {w}" for w in tendon.warnings())
+        report, folder = replay(log, design, tendon, out, logged=logged)
+    warn(logged.warnings)
     typer.echo(summary(report))
     typer.echo(f"report: {folder / 'report.md'}")
     typer.echo(f"figure: {folder / 'fig16.png'}")
@@ -92,8 +100,7 @@ def realgap_calibrate(
         logged = read_log(log)
         cal, folder = calibrate_log(log, design, out, names=names, max_evals=max_evals,
                                     progress=show, logged=logged)
-    for w in logged.warnings:
-        typer.secho(f"warning: {w}", err=True, fg=typer.colors.YELLOW)
+    warn(logged.warnings)
     fitted = ", ".join(f"{n} = {getattr(cal.params, n):.4g} ± "
                        f"{cal.stderr[n]:.2g}" if cal.stderr[n] is not None else
                        f"{n} = {getattr(cal.params, n):.4g}" for n in names)

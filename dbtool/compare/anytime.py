@@ -76,6 +76,22 @@ def best_so_far(rows: list[dict], record: dict | None = None) -> tuple[np.ndarra
     return np.asarray(xs), np.asarray(ys), not have
 
 
+def cell_curve(folder: Path, record: dict) -> tuple[np.ndarray, np.ndarray, bool]:
+    """:func:`best_so_far` of the cell in ``folder`` (its ``metrics.jsonl`` and record); a
+    garbled file, or a row whose units or metric is not a number, is one
+    :class:`~dbtool.errors.InputError` line naming it."""
+    from dbtool.errors import InputError
+    from dbtool.jsonfiles import read_jsonl
+
+    path = Path(folder) / "metrics.jsonl"
+    rows = read_jsonl(path)
+    try:
+        return best_so_far(rows, record)
+    except (TypeError, ValueError, KeyError, AttributeError) as exc:
+        raise InputError(f"{path}: a row's units or metric is not a number ({exc}); delete the "
+                         "cell's cell.json to run it again") from None
+
+
 def on_grid(units: np.ndarray, best: np.ndarray, grid: np.ndarray) -> np.ndarray:
     """The step function ``best`` (known from ``units`` on) at ``grid``; NaN before the first
     row."""
@@ -96,9 +112,7 @@ def curves(out_dir: str | Path) -> dict:
         rec = read_cell(folder)
         if not rec or rec.get("status") != "done" or not (folder / "metrics.jsonl").is_file():
             continue
-        rows = [json.loads(line) for line in (folder / "metrics.jsonl").read_text().splitlines()
-                if line.strip()]
-        x, y, rebuilt = best_so_far(rows, rec)
+        x, y, rebuilt = cell_curve(folder, rec)
         if len(x):
             cells.setdefault((rec["task"], rec["method"]), []).append(
                 (int(rec["seed"]), x, y, rebuilt))

@@ -8,7 +8,8 @@
         cell.json       status, metric, budget used, wall time, worker, commit (written last)
 
 A cell counts as finished only once ``cell.json`` says ``done``; anything else is run again on
-``--resume``. :func:`run_cell` is what every executor calls, in whatever process it runs. A
+``--resume``, but a ``cell.json`` that is not a record dbtool wrote is an error naming it
+(:func:`read_cell`). :func:`run_cell` is what every executor calls, in whatever process it runs. A
 method that does not read the seed (:func:`dbtool.compare.methods.seeded`) runs once per task;
 its other seeds' cells are copies of that one (:func:`copy_cell`, ``copied_from`` in their
 record).
@@ -29,6 +30,7 @@ from dbtool.atomic import atomic_write_text
 from dbtool.errors import InputError
 
 CELL_FILE = "cell.json"
+FORMAT = "dbtool.compare/1"  # of compare.json (dbtool.compare.run writes it)
 
 
 @dataclass(frozen=True)
@@ -54,11 +56,104 @@ class CellSpec:
 
 
 def read_cell(folder: Path) -> dict | None:
-    """The cell's record, or ``None`` if it never finished writing one."""
-    try:
-        return json.loads((folder / CELL_FILE).read_text())
-    except (OSError, ValueError):
+    """The cell's record, or ``None`` if it never finished writing one. A ``cell.json`` that
+    is not a record dbtool wrote (garbled JSON, not an object, a status other than done or
+    failed, a done cell without a finite metric, a field of the wrong type) is one
+    :class:`~dbtool.errors.InputError` line naming it: delete it to run the cell again."""
+    from dbtool.jsonfiles import field, integer, number, read_object
+
+    path = Path(folder) / CELL_FILE
+    if not path.is_file():
         return None
+    try:
+        rec = read_object(path)
+        status = field(rec, "status", str, path, required=True)
+        if status not in ("done", "failed"):
+            raise InputError(f"{path}: status must be done or failed, not {status!r}")
+        if status == "done":
+            number(f"{path}: metric", rec.get("metric"))
+        for key in ("method", "task", "budget", "error", "worker", "commit"):
+            if rec.get(key) is not None:
+                field(rec, key, str, path)
+        for key in ("seed", "forward_episodes", "gradient_episodes"):
+            if key in rec:
+                integer(f"{path}: {key}", rec[key], 0)
+        for key in ("budget_units", "budget_used", "wall_s"):
+            if key in rec:
+                number(f"{path}: {key}", rec[key], 0)
+    except InputError as exc:
+        raise InputError(f"{exc}; delete it to run the cell again") from None
+    return rec
+
+
+def check_cell(folder: Path) -> dict | None:
+    """:func:`read_cell`, and for a done cell its ``metrics.jsonl`` as the anytime curves read
+    it (:func:`dbtool.compare.anytime.cell_curve`): what ``--resume`` reads of a finished
+    cell, checked before it writes anything."""
+    rec = read_cell(folder)
+    if rec is not None and rec["status"] == "done" and (Path(folder) / "metrics.jsonl").is_file():
+        from dbtool.compare.anytime import cell_curve
+
+        cell_curve(Path(folder), rec)
+    return rec
+
+
+def read_compare_json(path: str | Path, resume: bool = False) -> dict:
+    """A comparison's ``compare.json`` checked (the one place ``report``, ``view`` and
+    ``compare --resume`` read it): a JSON object with a ``dbtool.compare/`` format and its
+    ``cells``, a list of ``[method, task, seed]`` (names of letters, digits, ``_`` and ``-``,
+    the seed an integer from 0); ``budget`` and ``arch`` texts, ``threads`` an integer >= 1,
+    ``budget_settings`` an object (``n_steps`` an integer, ``units`` a number). ``resume``:
+    also the exact format, a known budget, the thread count, and methods and tasks that this
+    version runs."""
+    from dbtool.inputs import MAX_SEED, MAX_STEPS
+    from dbtool.jsonfiles import field, integer, number, read_object, safe_name
+
+    path = Path(path)
+    meta = read_object(path)
+    fmt, cells = meta.get("format"), meta.get("cells")
+    if not isinstance(fmt, str) or not fmt.startswith("dbtool.compare/") or \
+            not isinstance(cells, list):
+        raise InputError(f"{path} is not a comparison file (no dbtool.compare format and "
+                         "cell list)")
+    for k, cell in enumerate(cells):
+        if not isinstance(cell, list) or len(cell) != 3:
+            raise InputError(f"{path}: cells[{k}] must be a [method, task, seed] triple")
+        safe_name(f"{path}: cells[{k}] method", cell[0])
+        safe_name(f"{path}: cells[{k}] task", cell[1])
+        integer(f"{path}: cells[{k}] seed", cell[2], 0, MAX_SEED)
+    for key in ("budget", "arch"):
+        field(meta, key, str, path)
+    if "threads" in meta:
+        integer(f"{path}: threads", meta["threads"], 1, 4096)
+    settings = field(meta, "budget_settings", dict, path) if meta.get("budget_settings") \
+        is not None else {}
+    if "n_steps" in settings:
+        integer(f"{path}: budget_settings.n_steps", settings["n_steps"], 1, MAX_STEPS)
+    if "units" in settings:
+        number(f"{path}: budget_settings.units", settings["units"], 0)
+    if resume:
+        from dbtool.compare.budget import get_budget
+        from dbtool.compare.methods import METHODS
+        from dbtool.sim.tasks import TASKS
+
+        if fmt != FORMAT:
+            raise InputError(f"{path} has format {fmt!r}; this dbtool resumes {FORMAT!r}")
+        for key in ("budget", "threads"):
+            if key not in meta:
+                raise InputError(f"{path}: {key} is missing")
+        try:
+            get_budget(meta["budget"])
+        except ValueError as exc:
+            raise InputError(f"{path}: {exc}") from None
+        for m, t, _ in cells:
+            if m not in METHODS:
+                raise InputError(f"{path}: unknown method {m!r} (this dbtool runs "
+                                 f"{', '.join(METHODS)})")
+            if t not in TASKS:
+                raise InputError(f"{path}: unknown task {t!r} (this dbtool runs "
+                                 f"{', '.join(TASKS)})")
+    return meta
 
 
 def worker_init(threads: int, arch: str = "cpu") -> None:

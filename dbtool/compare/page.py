@@ -15,7 +15,6 @@ episode set-up takes milliseconds), so the page is quick to write; each cell kee
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,8 +23,9 @@ from types import SimpleNamespace
 import numpy as np
 
 from dbtool.atomic import atomic_write_text, check_writable
-from dbtool.compare.cells import CellSpec, read_cell
+from dbtool.compare.cells import CellSpec, read_cell, read_compare_json
 from dbtool.errors import InputError, MissingFileError
+from dbtool.jsonfiles import safe_name
 
 MAX_POINTS = 1500  # particles drawn per cell in the page's 3D figure
 FIGURES = ("bars.png", "robots.png")  # the comparison's own figures, shown first
@@ -77,30 +77,19 @@ class Comparison:
     cells: list[Cell]
 
 
-def _json(path: Path, required: bool) -> dict:
+def _manifest(path: Path) -> dict:
+    """The comparison's ``manifest.json`` (``{}`` when there is none), checked for what the
+    summary shows: ``commit`` and ``created`` texts, ``dirty`` true or false, ``machine`` an
+    object."""
+    from dbtool.jsonfiles import field, read_object
+
     if not path.is_file():
-        if required:
-            raise MissingFileError(f"{path} not found: not a comparison folder")
         return {}
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise InputError(f"cannot read {path}: {exc}") from None
-    if not isinstance(data, dict):
-        raise InputError(f"{path} is not a JSON object")
-    return data
-
-
-def _asked(config: dict, path: Path) -> list[tuple[str, str, int]]:
-    cells = config.get("cells")
-    if not str(config.get("format", "")).startswith("dbtool.compare/") or \
-            not isinstance(cells, list):
-        raise InputError(f"{path} is not a comparison file (no dbtool.compare format and "
-                         "cell list)")
-    try:
-        return [(str(m), str(t), int(s)) for m, t, s in cells]
-    except (TypeError, ValueError):
-        raise InputError(f"{path}: cells must be [method, task, seed] triples") from None
+    m = read_object(path)
+    for key, typ in (("commit", str), ("created", str), ("dirty", bool), ("machine", dict)):
+        if m.get(key) is not None:
+            field(m, key, typ, path)
+    return m
 
 
 def read_comparison(folder: str | Path) -> Comparison:
@@ -111,11 +100,16 @@ def read_comparison(folder: str | Path) -> Comparison:
     from dbtool.compare.report import read_results
 
     folder = Path(folder)
-    config = _json(folder / "compare.json", True)
-    asked = _asked(config, folder / "compare.json")
-    manifest = _json(folder / "manifest.json", False)
+    if not (folder / "compare.json").is_file():
+        raise MissingFileError(f"{folder / 'compare.json'} not found: not a comparison folder")
+    config = read_compare_json(folder / "compare.json")
+    asked = [(m, t, s) for m, t, s in config["cells"]]
+    manifest = _manifest(folder / "manifest.json")
     csv_path = folder / "results.csv"
     rows = read_results(csv_path) if csv_path.is_file() else []
+    for k, r in enumerate(rows):  # the names become folder names
+        safe_name(f"{csv_path}: line {k + 2}: method", r["method"])
+        safe_name(f"{csv_path}: line {k + 2}: task", r["task"])
     by_cell = {(r["method"], r["task"], r["seed"]): r for r in rows}
     cells = []
     for key in dict.fromkeys([*asked, *by_cell]):

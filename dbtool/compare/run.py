@@ -23,7 +23,13 @@ from pathlib import Path
 
 from dbtool.atomic import atomic_write_text
 from dbtool.compare.budget import get_budget
-from dbtool.compare.cells import CellSpec, copy_cell, read_cell, read_compare_json
+from dbtool.compare.cells import (
+    CellSpec,
+    check_cell,
+    copy_cell,
+    read_cell,
+    read_compare_json,
+)
 from dbtool.compare.executors import check_executor, execute
 from dbtool.compare.methods import METHODS, seeded
 from dbtool.errors import InputError
@@ -110,7 +116,7 @@ def prepare(out: Path, cfg: CompareConfig, resume: bool) -> tuple[dict, RunFolde
             raise CompareError(f"{out} is not a comparison folder (no compare.json)")
         meta = read_compare_json(meta_path, resume=True)  # one line on what is wrong
         for m, t, s in meta["cells"]:  # every record read later, checked before any write
-            read_cell(out / "cells" / f"{m}-{t}-s{s}")
+            check_cell(out / "cells" / f"{m}-{t}-s{s}")
         if meta["budget"] != cfg.budget or meta["threads"] != cfg.threads:
             raise CompareError(f"{out} was run with --budget {meta['budget']} --threads "
                                f"{meta['threads']}; a resume must use the same")

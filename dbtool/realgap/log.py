@@ -26,6 +26,13 @@ PHASES = ("pull", "release")
 SOURCES = ("real", "sim", "illustrative")
 HEADER = ("tendon", "phase", "step", "displacement_mm", "tip_distance_mm")
 
+# what a tendon protocol can measure: a tip distance beyond 10 m or a tendon pulled more than
+# 1 m is not a reading of a gripper (the reference finger is 72.5 mm long, its tips 77 mm
+# apart, the paper's protocol pulls 10 mm); such a value is a unit or typing slip
+MAX_TIP_MM = 10_000.0
+MAX_DISPLACEMENT_MM = 1_000.0
+MAX_ROWS = 1_000  # steps of one tendon (each is a simulated hold in replay and calibrate)
+
 _META = re.compile(r"#\s*([A-Za-z_][\w.-]*)\s*:(.*)$")
 _UNIT = re.compile(r"(displacement|tip_distance)(?:_([A-Za-z]+))?$")
 
@@ -173,8 +180,14 @@ def _row(fields: list[str], err: Callable[[str], LogError]) -> tuple[str, str, i
     tip = _number(tip_s, "tip_distance_mm", err)
     if disp < 0:
         raise err(f"negative displacement_mm {disp_s}")
+    if disp > MAX_DISPLACEMENT_MM:
+        raise err(f"displacement_mm {disp_s} is more than {MAX_DISPLACEMENT_MM:g} mm: not a "
+                  "tendon displacement (the unit is mm)")
     if tip <= 0:
         raise err(f"tip_distance_mm must be > 0, got {tip_s}")
+    if tip > MAX_TIP_MM:
+        raise err(f"tip_distance_mm {tip_s} is more than {MAX_TIP_MM:g} mm: not a distance "
+                  "between fingertips (the unit is mm)")
     return tendon, phase, step, disp, tip
 
 
@@ -188,6 +201,8 @@ def _follows(seq: list[tuple[str, float, float]], tendon: str, phase: str, step:
         if step < len(seq):
             raise err(f"duplicate {tendon} step {step} (the last was {len(seq) - 1})")
         raise err(f"{tendon} step {step} after step {len(seq) - 1} (expected {len(seq)})")
+    if step >= MAX_ROWS:
+        raise err(f"{tendon} step {step}: a log holds at most {MAX_ROWS} steps per tendon")
     if not seq:
         if phase != "pull":
             raise err(f"{tendon} starts with release: it needs pull rows first")

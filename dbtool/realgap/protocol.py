@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -19,6 +20,7 @@ import numpy as np
 
 from dbtool.design import Design, DesignFileError
 from dbtool.errors import InputError, MissingFileError
+from dbtool.jsonfiles import kind
 from dbtool.realgap.log import TENDONS, Curve, TipLog
 from dbtool.runs import design_name
 from dbtool.sim.robot import Robot
@@ -27,6 +29,14 @@ from dbtool.sim.tasks import get_task
 from dbtool.sim.tasks.base import DX, SPACING
 
 MM_PER_UNIT = 1000.0  # the export's scale: a 60 x 72.5 x 42.5 mm finger
+
+
+# per tendon parameter: whether it must be > 0 (else >= 0) and its largest value; beyond these
+# a value is a slip (the calibration searches gain 0.2-5, stiffness 0.25-4, lengths 0-5 mm)
+# (stiffness x16 with the bench's mass scaling is a CFL number of 0.88: beyond it the explicit
+# steps cannot be stable)
+LIMITS = {"gain": (True, 100.0), "stiffness_scale": (True, 16.0), "friction_mm": (False, 1000.0),
+          "slack_mm": (False, 1000.0)}
 
 
 @dataclass
@@ -44,29 +54,61 @@ class TendonParams:
     slack_mm: float = 0.0
 
     def __post_init__(self) -> None:
-        for name, low in (("gain", 0.0), ("stiffness_scale", 0.0)):
-            if not np.isfinite(getattr(self, name)) or getattr(self, name) <= low:
-                raise InputError(f"{name} must be a positive number, got {getattr(self, name)}")
-        for name in ("friction_mm", "slack_mm"):
-            if not np.isfinite(getattr(self, name)) or getattr(self, name) < 0:
-                raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
+        for name, (positive, high) in LIMITS.items():
+            value = getattr(self, name)
+            if isinstance(value, np.generic) and not isinstance(value, np.bool_):
+                value = value.item()  # NumPy numbers (the calibration's steps) are numbers
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise InputError(f"{name} must be a number, not {kind(value)}")
+            try:
+                value = float(value)
+            except OverflowError:  # an integer beyond any float
+                value = math.inf
+            if not math.isfinite(value):
+                raise InputError(f"{name} must be a finite number, got {value}")
+            if positive and not value > 0:
+                raise InputError(f"{name} must be a positive number, got {value:g}")
+            if not value >= 0:
+                raise InputError(f"{name} must be >= 0, got {value:g}")
+            if not value <= high:
+                raise InputError(f"{name} must be at most {high:g}, got {value:g}")
+            setattr(self, name, value)
 
     @classmethod
     def load(cls, path: str | Path) -> TendonParams:
-        """Read ``params.json`` (its ``params`` entry, or the top level)."""
-        try:
-            data = json.loads(Path(path).read_text())
-        except FileNotFoundError:
-            raise MissingFileError(f"parameters file not found: {path}") from None
-        except (OSError, json.JSONDecodeError) as exc:
-            raise InputError(f"cannot read parameters {path}: {exc}") from None
-        data = data.get("params", data) if isinstance(data, dict) else None
+        """Read ``params.json`` (its ``params`` entry, or the top level): a JSON object of
+        tendon parameters, each a number (``true`` and ``"1.3"`` are not) within
+        :data:`LIMITS`; a missing, garbled or out-of-range file is one line naming it."""
+        from dbtool.jsonfiles import read_json
+
+        if not Path(path).exists():
+            raise MissingFileError(f"parameters file not found: {path}")
+        data = read_json(path)
+        if isinstance(data, dict) and "params" in data:
+            data = data["params"]
         if not isinstance(data, dict):
-            raise InputError(f"{path}: expected a JSON object of tendon parameters")
-        unknown = set(data) - set(asdict(cls()))
+            raise InputError(f"{path}: expected a JSON object of tendon parameters "
+                             f"({', '.join(LIMITS)}), not {kind(data)}")
+        unknown = set(data) - set(LIMITS)
         if unknown:
-            raise InputError(f"{path}: unknown parameter(s) {', '.join(sorted(unknown))}")
-        return cls(**{k: float(v) for k, v in data.items()})
+            raise InputError(f"{path}: unknown parameter(s) "
+                             f"{', '.join(map(repr, sorted(unknown)))}; expected "
+                             f"{', '.join(LIMITS)}")
+        try:
+            return cls(**data)
+        except InputError as exc:
+            raise InputError(f"{path}: {exc}") from None
+
+    def warnings(self) -> list[str]:
+        """A line for each value outside the range the calibration searches (where the bench
+        is known to be stable: :data:`dbtool.realgap.calibrate.BOUNDS`); legal, but the
+        simulation may blow up or the strain cap may flatten the curves."""
+        from dbtool.realgap.calibrate import BOUNDS
+
+        return [f"{name} {getattr(self, name):g} is outside {lo:g} .. {hi:g}, the range in "
+                "which the tendon bench is known to be stable" + (
+                    " (the simulation may blow up)" if name == "stiffness_scale" else "")
+                for name, (lo, hi) in BOUNDS.items() if not lo <= getattr(self, name) <= hi]
 
 
 @dataclass
@@ -116,26 +158,31 @@ def load_gripper(path: str | Path) -> tuple[Design, str]:
 def tendon_groups(design_path: str | Path, design: Design) -> dict[str, int]:
     """Actuator group of each tendon: from the export's ``tendons.json`` when there is one,
     else the export's rule (flexion runs through the inner strip, group 1)."""
+    from dbtool.export.reports.page import read_tendons
+
     groups = {"extension": 0, "flexion": 1}
     p = Path(design_path)
-    routing = (p if p.is_dir() else p.parent) / "tendons.json"
-    if routing.is_file():
-        for t in json.loads(routing.read_text()).get("tendons", []):
-            if t.get("finger") == "finger" and t.get("role") in groups:
-                groups[t["role"]] = int(t["group"])
+    folder = p if p.is_dir() else p.parent
+    n_groups = np.asarray(design.robot.actuators).shape[-1]
+    for t in read_tendons(folder).get("tendons", []):
+        if t["finger"] == "finger" and t["role"] in groups:
+            if t["group"] >= n_groups:
+                raise InputError(f"{folder / 'tendons.json'}: tendon {t['name']} runs through "
+                                 f"actuator group {t['group']}, but the design has "
+                                 f"{n_groups} groups")
+            groups[t["role"]] = t["group"]
     return groups
 
 
 def export_scale(design_path: str | Path) -> float:
     """mm per simulation unit: the export's (its ``report.json``) when the design comes from
     an export folder, else the default export scale."""
+    from dbtool.export.reports.page import is_export, read_export_report
+
     p = Path(design_path)
-    report = (p if p.is_dir() else p.parent) / "report.json"
-    if report.is_file():
-        try:
-            return float(json.loads(report.read_text()).get("mm_per_sim_unit", MM_PER_UNIT))
-        except (ValueError, TypeError):
-            pass
+    folder = p if p.is_dir() else p.parent
+    if is_export(folder):
+        return float(read_export_report(folder).get("mm_per_sim_unit", MM_PER_UNIT))
     return MM_PER_UNIT
 
 
@@ -260,6 +307,24 @@ class Bench:
             out[t][i] = tip[c]
             res[t][i] = r
         return out, res, h, sim, reads
+
+
+def check_strain(bench: Bench, log: TipLog, params: TendonParams) -> list[str]:
+    """Warn (return, and append to ``log.warnings``) for each tendon whose largest logged
+    displacement asks its strip for more than the tendon map's strain cap (0.6): the
+    simulated finger stops there, so the readings beyond cannot be matched."""
+    out = []
+    for tendon, curve in log.curves.items():
+        if tendon not in bench.length_mm or not len(curve.displacement):
+            continue
+        d = float(curve.displacement.max())
+        cap = 0.6 * bench.length_mm[tendon] / params.gain + params.slack_mm + params.friction_mm
+        if d > cap:
+            out.append(f"{log.name}: {tendon} is pulled up to {d:g} mm, beyond the {cap:.1f} mm "
+                       f"at which its {bench.length_mm[tendon]:.1f} mm strip reaches the tendon "
+                       "map's strain cap (0.6); the simulated finger moves no further")
+    log.warnings.extend(out)
+    return out
 
 
 def standard_schedule(step_mm: float = 2.0, max_mm: float = 10.0,

@@ -18,7 +18,6 @@ Designs are robotized when first shown (a few seconds each on a laptop CPU) and 
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -65,23 +64,72 @@ ROW = 4  # designs per row of the buffer's grid
 XT_SLOT = -1  # x_t is drawn one slot to the left of the solid scored at its stop
 
 
+def _arrays(path: Path, shapes: dict[str, tuple]) -> dict[str, np.ndarray]:
+    """The arrays of the ``.npz`` file ``path`` named in ``shapes``, each real and finite with
+    the shape given there (``None``: any length; a name: the same length wherever the name
+    recurs); one line naming the file and the array otherwise."""
+    import zipfile
+
+    from dbtool.errors import InputError
+
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            missing = [k for k in shapes if k not in data.files]
+            if missing:
+                raise InputError(f"{path} lacks {', '.join(missing)}")
+            arrays = {k: data[k] for k in shapes}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        raise InputError(f"{path} is not a readable .npz file ({exc.__class__.__name__})"
+                         ) from None
+    sizes: dict[str, int] = {}
+    for k, shape in shapes.items():
+        a = arrays[k]
+        if a.dtype.kind not in "fiu" or not np.isfinite(a).all():
+            raise InputError(f"{path}: {k} must hold finite numbers")
+        ok = a.ndim == len(shape)
+        for n, want in zip(a.shape, shape, strict=False):
+            if isinstance(want, str):
+                ok = ok and sizes.setdefault(want, n) == n
+            elif want is not None:
+                ok = ok and n == want
+        if not ok:
+            raise InputError(f"{path}: {k} has shape {a.shape}, expected "
+                             f"({', '.join(str(w) for w in shape)})")
+        arrays[k] = a
+    return arrays
+
+
 def run_extras(folder: Path, task):
     """The extras of the run of ``task`` in ``folder`` for :func:`dbtool.viz.viewer.serve`,
-    or None when it has neither ``best.npz`` nor ``trajectory.npz``."""
+    or None when it has neither ``best.npz`` nor ``trajectory.npz``. The files are checked
+    here, before the viewer starts: a garbled one is one line naming it."""
+    from dbtool.errors import InputError
+    from dbtool.jsonfiles import field, read_object
+    from dbtool.prior.sampling.diffusion import T_TRAIN
+
     folder = Path(folder)
     buffer, traj = None, None
     if (folder / "best.npz").is_file():
-        with np.load(folder / "best.npz") as b:
-            buffer = {k: b[k] for k in ("clouds", "epochs", "metrics")}
+        buffer = _arrays(folder / "best.npz", {"clouds": ("n", None, 3), "epochs": ("n",),
+                                               "metrics": ("n",)})
     if (folder / "trajectory.npz").is_file():
-        with np.load(folder / "trajectory.npz") as t:
-            traj = {k: t[k] for k in t.files}
+        path = folder / "trajectory.npz"
+        traj = _arrays(path, {"t": ("stops",), "sample": ("samples",),
+                              "metric": ("samples",), "xt": ("samples", "stops", None, 3),
+                              "x0": ("samples", "stops", None, 3)})
+        t = traj["t"]
+        if t.dtype.kind not in "iu" or (len(t) and not (0 <= t.min() and t.max() <= T_TRAIN)):
+            raise InputError(f"{path}: t must hold diffusion steps 0 .. {T_TRAIN}")
     if buffer is None and traj is None:
         return None
     if traj is not None:  # the design the chain scored: the x0-estimate's, or x_t's own
-        config = folder / "config.json"
-        config = json.loads(config.read_text()) if config.is_file() else {}
-        traj["target"] = (config.get("codesign") or {}).get("target", "x0")
+        path = folder / "config.json"
+        config = read_object(path) if path.is_file() else {}
+        codesign = field(config, "codesign", dict, path) if config.get("codesign") else {}
+        target = field(codesign, "target", str, f"{path}: codesign", "x0")
+        if target not in ("x0", "xt"):
+            raise InputError(f"{path}: codesign.target must be x0 or xt, not {target!r}")
+        traj["target"] = target
 
     def extras(server, view) -> None:
         add_run_views(server, view, task, buffer, traj)

@@ -17,7 +17,6 @@ the channel tube and the cylinders are the export's own (:mod:`dbtool.export.gri
 
 from __future__ import annotations
 
-import json
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +29,12 @@ from dbtool.export.gripper.channel_path import fillet
 from dbtool.export.gripper.channels import tube
 from dbtool.export.gripper.mounting import vertical_cylinder
 from dbtool.export.gripper.tendons import Tendon
-from dbtool.export.reports.page import ROLE_COLOURS
+from dbtool.export.reports.page import (
+    ROLE_COLOURS,
+    load_mesh,
+    read_export_report,
+    read_tendons,
+)
 from dbtool.viz.viewer import aim_camera, open_server, rgb, url_of
 
 PART_COLOURS = {"finger": (224, 112, 32), "finger_mirror": (238, 176, 60),
@@ -47,20 +51,18 @@ CHANNEL_SHOWN = 0.97  # the channel tubes are drawn this much thinner than the c
 def load_parts(folder: Path, report: dict) -> dict:
     """Each part's STL (``trimesh.Trimesh``) in the assembly's frame, its print pose undone;
     ``assembly.stl`` alone when no part has an STL (an export with ``--3mf`` only has none)."""
-    import trimesh
-
     out = {}
     for name, part in report.get("parts", {}).items():
         file = folder / f"{name}.stl"
         if name == "assembly" or not file.is_file():
             continue
-        mesh = trimesh.load(file, force="mesh")
+        mesh = load_mesh(file)
         pose = part.get("print_pose")
         if pose is not None:
             mesh.apply_transform(np.linalg.inv(np.asarray(pose["matrix"], float)))
         out[name] = mesh
     if not out and (folder / "assembly.stl").is_file():
-        out["assembly"] = trimesh.load(folder / "assembly.stl", force="mesh")
+        out["assembly"] = load_mesh(folder / "assembly.stl")
     return out
 
 
@@ -283,12 +285,11 @@ def serve_export(folder: Path, host: str = "127.0.0.1", port: int = 8080) -> Exp
     """Start the viewer of an export folder and return at once; :meth:`ExportView.stop`
     ends it (docs/viewing.md)."""
     folder = Path(folder)
-    report = json.loads((folder / "report.json").read_text())
+    report = read_export_report(folder)
+    tj = read_tendons(folder)
     meshes = load_parts(folder, report)
     if not meshes:
         raise InputError(f"{folder} has no STL of its parts to show (an export with --3mf only)")
-    tj = folder / "tendons.json"
-    tj = json.loads(tj.read_text()) if tj.is_file() else {}
     tendons, mounting = tj.get("tendons", []), report.get("mounting", {})
 
     server = open_server(host, port, f"export {folder.name}")

@@ -12,6 +12,7 @@ so is the viewer's.
 
 from __future__ import annotations
 
+import errno
 import socket
 import threading
 from dataclasses import dataclass, field
@@ -34,16 +35,42 @@ def require_viser():
     return viser
 
 
+def bind_host(host: str) -> str:
+    """``host`` as the server binds it: an IPv6 address may be given in its URL form,
+    ``[::1]``."""
+    return host[1:-1] if host.startswith("[") and host.endswith("]") else host
+
+
 def check_port(host: str, port: int) -> None:
     """Fail (one line) when ``port`` cannot be bound on ``host``; viser itself would move to
-    the next free port without saying so."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            s.bind((host, port))
-        except OSError as exc:
-            raise InputError(f"port {port} on {host} is not available ({exc.strerror}); "
-                             "choose another with --port") from None
+    the next free port without saying so. Every address ``host`` resolves to is tried, in
+    its own family (IPv4 or IPv6, as the server binds them: ``localhost`` is both), and one
+    whose family this machine lacks is skipped as the server skips it."""
+    name = bind_host(host)
+    try:
+        infos = socket.getaddrinfo(name or None, port, type=socket.SOCK_STREAM,
+                                   flags=socket.AI_PASSIVE)
+    except (socket.gaierror, UnicodeError) as exc:
+        why = getattr(exc, "strerror", None) or str(exc)
+        raise InputError(f"--host {host} is not an address or a name of this machine "
+                         f"({why})") from None
+    bound = 0
+    for family, kind, proto, _, address in dict.fromkeys(infos):
+        with socket.socket(family, kind, proto) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            if family == socket.AF_INET6 and hasattr(socket, "IPPROTO_IPV6"):
+                s.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 1)
+            try:
+                s.bind(address)
+            except OSError as exc:
+                if exc.errno == errno.EADDRNOTAVAIL:  # the family is off here (asyncio skips)
+                    continue
+                raise InputError(f"port {port} on {host} is not available ({exc.strerror}); "
+                                 "choose another with --port") from None
+            bound += 1
+    if not bound:
+        raise InputError(f"--host {host} is not an address of this machine: nothing can be "
+                         "bound there")
 
 
 def rgb(hex_colours) -> np.ndarray:
@@ -97,14 +124,18 @@ def open_server(host: str, port: int, title: str, up: str = "+y"):
     labelled ``dbtool: title``, with ``up`` as the scene's up direction."""
     viser = require_viser()
     check_port(host, port)
-    server = viser.ViserServer(host=host, port=port, label=f"dbtool: {title}", verbose=False)
+    server = viser.ViserServer(host=bind_host(host), port=port, label=f"dbtool: {title}",
+                               verbose=False)
     server.scene.set_up_direction(up)
     return server
 
 
 def url_of(server, host: str) -> str:
     """The URL a browser on this machine opens for ``server``."""
-    shown = "127.0.0.1" if host in ("0.0.0.0", "") else host
+    host = bind_host(host)
+    shown = {"0.0.0.0": "127.0.0.1", "": "127.0.0.1", "::": "::1"}.get(host, host)
+    if ":" in shown:  # an IPv6 address goes in brackets
+        shown = f"[{shown}]"
     return f"http://{shown}:{server.get_port()}"
 
 

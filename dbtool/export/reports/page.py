@@ -12,13 +12,21 @@ printed files keep every triangle): the finger alone has about 115,000.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from dbtool.atomic import atomic_write_text
 from dbtool.errors import InputError
+from dbtool.jsonfiles import (
+    field,
+    finite_or_none,
+    integer,
+    number,
+    read_object,
+    safe_name,
+    vector,
+)
 
 ROLE_COLOURS = {"flexion": "#1f77b4", "extension": "#d62728"}
 
@@ -26,6 +34,109 @@ ROLE_COLOURS = {"flexion": "#1f77b4", "extension": "#d62728"}
 def is_export(folder: Path) -> bool:
     """Whether ``folder`` is a ``dbtool export`` folder (it holds the export's report)."""
     return (folder / "report.json").is_file() and (folder / "report.md").is_file()
+
+
+MAX_MM = 1e5  # 100 m: no coordinate or size of an export comes near it
+
+
+def read_export_report(folder: str | Path) -> dict:
+    """The export's ``report.json``, checked for every entry that ``dbtool report``,
+    ``dbtool view`` and ``dbtool realgap`` read (the one place they are checked): a JSON
+    object; ``task`` and ``design`` texts; ``mm_per_sim_unit`` a positive number; ``parts``
+    an object of part name (letters, digits, ``_``, ``-``: it names the part's STL) to an
+    object whose ``watertight`` is true or false, ``bodies`` an integer, ``volume_mm3`` and
+    ``min_wall_mm`` numbers, ``bbox_mm`` three numbers and ``print_pose.matrix`` an invertible
+    4 x 4 matrix; ``tendons`` with ``count`` and ``all_ok``; ``mounting`` with lists of
+    ``[x, z]`` holes and pins and positive diameters. Anything else is one
+    :class:`~dbtool.errors.InputError` line naming the file and the entry."""
+    path = Path(folder) / "report.json"
+    report = read_object(path)
+    for key in ("task", "design"):
+        field(report, key, str, path)
+    if "mm_per_sim_unit" in report:
+        number(f"{path}: mm_per_sim_unit", report["mm_per_sim_unit"], 0, 1e6, positive=True)
+    parts = field(report, "parts", dict, path, {})
+    for name, part in parts.items():
+        safe_name(f"{path}: the part name {name!r}", name)
+        where = f"{path}: parts.{name}"
+        if not isinstance(part, dict):
+            raise InputError(f"{where} must be an object, not {type(part).__name__}")
+        field(part, "watertight", bool, where)
+        if "bodies" in part:
+            integer(f"{where}.bodies", part["bodies"], 0)
+        if "volume_mm3" in part:
+            number(f"{where}.volume_mm3", part["volume_mm3"], 0, MAX_MM**3)
+        if "min_wall_mm" in part:
+            finite_or_none(f"{where}.min_wall_mm", part["min_wall_mm"])
+        if "bbox_mm" in part:
+            vector(f"{where}.bbox_mm", part["bbox_mm"], 3, MAX_MM)
+        pose = part.get("print_pose")
+        if pose is not None:
+            if not isinstance(pose, dict) or "matrix" not in pose:
+                raise InputError(f"{where}.print_pose must be an object with a matrix")
+            _pose_matrix(f"{where}.print_pose.matrix", pose["matrix"])
+    tendons = field(report, "tendons", dict, path)
+    if tendons is not None:
+        integer(f"{path}: tendons.count", tendons.get("count"), 0)
+        field(tendons, "all_ok", bool, f"{path}: tendons", required=True)
+    mounting = field(report, "mounting", dict, path)
+    if mounting is not None:
+        for key in ("holes", "pins", "pins_mirror"):
+            for k, xz in enumerate(field(mounting, key, list, f"{path}: mounting", [])):
+                vector(f"{path}: mounting.{key}[{k}]", xz, 2, MAX_MM)
+        for key in ("diameter_mm", "pin_diameter_mm", "pin_length_mm"):
+            if key in mounting:
+                number(f"{path}: mounting.{key}", mounting[key], 0, 1000, positive=True)
+    return report
+
+
+def _pose_matrix(name: str, matrix: object) -> np.ndarray:
+    rows = matrix if isinstance(matrix, list) and len(matrix) == 4 else None
+    if rows is None:
+        raise InputError(f"{name} must be a 4 x 4 matrix (a list of 4 rows)")
+    m = np.array([vector(f"{name}[{i}]", r, 4, MAX_MM) for i, r in enumerate(rows)])
+    if abs(np.linalg.det(m[:3, :3])) < 1e-9:
+        raise InputError(f"{name} is not invertible")
+    return m
+
+
+def read_tendons(folder: str | Path) -> dict:
+    """The export's ``tendons.json`` checked (``{}`` when the folder has none): a JSON object
+    whose ``tendons`` is a list of objects, each with a ``name`` (letters, digits, ``_``,
+    ``-``), ``finger`` and ``role`` texts, an actuator ``group`` (an integer >= 0), routing
+    ``points``, ``anchor`` and ``exit`` (and ``entry``, ``lead``, ``tip`` if given) as
+    ``[x, y, z]`` in mm; ``channel_diameter_mm`` and ``bend_radius_mm`` numbers >= 0."""
+    path = Path(folder) / "tendons.json"
+    if not path.is_file():
+        return {}
+    data = read_object(path)
+    for key in ("channel_diameter_mm", "bend_radius_mm"):
+        if key in data:
+            number(f"{path}: {key}", data[key], 0, 1000)
+    tendons = field(data, "tendons", list, path, [])
+    names = set()
+    for k, t in enumerate(tendons):
+        where = f"{path}: tendons[{k}]"
+        if not isinstance(t, dict):
+            raise InputError(f"{where} must be an object, not {type(t).__name__}")
+        name = safe_name(f"{where}.name", t.get("name"))
+        if name in names:
+            raise InputError(f"{where}: the name {name!r} appears twice")
+        names.add(name)
+        for key in ("finger", "role"):
+            field(t, key, str, where, required=True)
+        integer(f"{where}.group", t.get("group"), 0, 63)
+        points = field(t, "points", list, where, required=True)
+        if not points:
+            raise InputError(f"{where}.points is empty")
+        for i, p in enumerate(points):
+            vector(f"{where}.points[{i}]", p, 3, MAX_MM)
+        for key in ("anchor", "exit"):
+            vector(f"{where}.{key}", t.get(key), 3, MAX_MM)
+        for key in ("entry", "lead", "tip"):
+            if t.get(key):
+                vector(f"{where}.{key}", t[key], 3, MAX_MM)
+    return data
 
 
 def _cluster(vertices: np.ndarray, faces: np.ndarray, cell: float
@@ -62,25 +173,22 @@ def assembly_figure(folder: Path, max_faces: int = 40_000):
     """The assembled part (``assembly.stl``, else ``body.stl``) and the tendon paths, in mm,
     y up; None when the folder has no STL of it (an export with ``--3mf`` only)."""
     import plotly.graph_objects as go
-    import trimesh
 
     mesh_file = next((folder / n for n in ("assembly.stl", "body.stl")
                       if (folder / n).is_file()), None)
     if mesh_file is None:
         return None
-    mesh = trimesh.load(mesh_file, force="mesh")
+    mesh = load_mesh(mesh_file)
     v, f = decimate(np.asarray(mesh.vertices), np.asarray(mesh.faces), max_faces)
     traces = [go.Mesh3d(x=v[:, 0], y=v[:, 2], z=v[:, 1], i=f[:, 0], j=f[:, 1], k=f[:, 2],
                         color="#ff9f1c", opacity=0.45, name=mesh_file.stem, flatshading=True,
                         hoverinfo="skip")]
-    tendons = folder / "tendons.json"
-    if tendons.is_file():
-        for t in json.loads(tendons.read_text())["tendons"]:
-            p = np.asarray(t["points"], float)
-            traces.append(go.Scatter3d(x=p[:, 0], y=p[:, 2], z=p[:, 1], mode="lines+markers",
-                                       name=t["name"], marker={"size": 2},
-                                       line={"color": ROLE_COLOURS.get(t["role"], "black"),
-                                             "width": 5}))
+    for t in read_tendons(folder).get("tendons", []):
+        p = np.asarray(t["points"], float)
+        traces.append(go.Scatter3d(x=p[:, 0], y=p[:, 2], z=p[:, 1], mode="lines+markers",
+                                   name=t["name"], marker={"size": 2},
+                                   line={"color": ROLE_COLOURS.get(t["role"], "black"),
+                                         "width": 5}))
     axis = {"title": ""}
     fig = go.Figure(traces)
     fig.update_layout(title=f"{mesh_file.name} ({len(f):,} of {len(mesh.faces):,} triangles "
@@ -89,6 +197,33 @@ def assembly_figure(folder: Path, max_faces: int = 40_000):
                       scene={"aspectmode": "data", "xaxis": axis, "yaxis": axis,
                              "zaxis": {**axis, "title": "up"}})
     return fig
+
+
+def read_text(path: Path) -> str:
+    """A text file of the export (its Markdown), or one line saying why it cannot be read."""
+    try:
+        return path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise InputError(f"cannot read {path}: not UTF-8 text") from None
+
+
+def load_mesh(path: Path):
+    """An STL of the export as a ``trimesh.Trimesh`` with at least one triangle, or one line
+    saying why not."""
+    import trimesh
+
+    try:
+        mesh = trimesh.load(path, force="mesh")
+        faces = np.asarray(mesh.faces)
+        vertices = np.asarray(mesh.vertices, float)
+    except Exception as exc:  # noqa: BLE001 - any parser failure gets the same line
+        raise InputError(f"{path} is not a readable STL mesh ({exc.__class__.__name__})"
+                         ) from None
+    if faces.ndim != 2 or len(faces) == 0:
+        raise InputError(f"{path} holds no triangles")
+    if not np.isfinite(vertices).all():
+        raise InputError(f"{path} has NaN or infinite vertices")
+    return mesh
 
 
 def _part_rows(report: dict) -> dict:
@@ -116,10 +251,11 @@ def write_export_page(folder: str | Path, name: str | None = None) -> Path:
     folder = Path(folder)
     if not is_export(folder):
         raise InputError(f"{folder} is not an export folder (no report.json and report.md)")
-    report = json.loads((folder / "report.json").read_text())
+    report = read_export_report(folder)
+    read_tendons(folder)
+    texts = {n: read_text(folder / n) for n in ("assembly.md", "report.md")
+             if (folder / n).is_file()}
     fig = assembly_figure(folder)
-    texts = {name: (folder / name).read_text() for name in ("assembly.md", "report.md")
-             if (folder / name).is_file()}
     images = {name: (folder / name).read_bytes() for name in ("exploded.png", "tendons.png")
               if (folder / name).is_file()}
     page = render_html(f"dbtool export: {name or folder.name}", _part_rows(report),

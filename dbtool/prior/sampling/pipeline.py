@@ -105,20 +105,104 @@ def load_model(path: str | Path, kind: str | None = None) -> tuple[PointDiffusio
                                         or {"ema", "config"} <= ck.keys()):
         raise CheckpointError(f"not a dbtool prior checkpoint: {path}")
     if "ema" in ck:  # training checkpoint
-        meta = {"kind": ck["config"]["kind"], "model": ck["config"]["model"],
-                "steps": ck["step"], "train_seconds": ck["elapsed"], "train_config": ck["config"]}
+        config = ck["config"]
+        if not isinstance(config, dict):
+            raise CheckpointError(f"{path}: the training checkpoint's config is not a "
+                                  "dictionary")
+        meta = {"kind": config.get("kind"), "model": config.get("model"),
+                "steps": ck.get("step"), "train_seconds": ck.get("elapsed"),
+                "train_config": config}
         state = ck["ema"]
     else:
         meta, state = {k: v for k, v in ck.items() if k != "state"}, ck["state"]
+    if meta.get("kind") not in ("base", "upsampler"):
+        raise CheckpointError(f"{path} does not say which model it holds (its kind must be "
+                              f"base or upsampler, not {meta.get('kind')!r})")
     if kind is not None and meta.get("kind") != kind:
         raise CheckpointError(f"{path} holds the {meta.get('kind')} model, not the {kind} model")
+    check_meta(path, meta)
+    cfg = model_config(path, meta["model"])
+    check_state(path, cfg, state)
     try:
-        model = PointDiffusionTransformer(ModelConfig(**meta["model"]))
+        model = PointDiffusionTransformer(cfg)
         model.load_state_dict(state)
-    except (TypeError, RuntimeError) as exc:
+    except (TypeError, RuntimeError, ValueError) as exc:
         raise CheckpointError(f"{path}: weights do not match the model they describe") from exc
     model.eval().requires_grad_(False)
     return model, meta
+
+
+MAX_SIZE = 1 << 16  # any size of a model config (the shipped models: width 128, 6 blocks)
+
+
+def model_config(path: Path, model: object) -> ModelConfig:
+    """The ``model`` entry of a weights file as a :class:`ModelConfig`: a dictionary of its
+    fields, each an integer in ``0 .. 65536`` (``coarse``: true or false)."""
+    from dataclasses import fields
+
+    if not isinstance(model, dict):
+        raise CheckpointError(f"{path}: the model description is not a dictionary")
+    known = {f.name: f for f in fields(ModelConfig)}
+    unknown = sorted(set(model) - set(known))
+    if unknown:
+        raise CheckpointError(f"{path}: unknown model setting(s) {', '.join(map(str, unknown))}")
+    for name, value in model.items():
+        if name == "coarse":
+            if not isinstance(value, bool):
+                raise CheckpointError(f"{path}: model setting coarse must be true or false, "
+                                      f"not {value!r}")
+        elif isinstance(value, bool) or not isinstance(value, int) or \
+                not 0 <= value <= MAX_SIZE:
+            raise CheckpointError(f"{path}: model setting {name} must be an integer from 0 to "
+                                  f"{MAX_SIZE}, not {value!r}")
+    return ModelConfig(**model)
+
+
+def check_state(path: Path, cfg: ModelConfig, state: object) -> None:
+    """``state`` holds a finite tensor of the right shape for every parameter of the model
+    ``cfg`` describes, and nothing else. The model is laid out on PyTorch's ``meta`` device
+    first, so a file that describes a huge model costs no memory."""
+    if not isinstance(state, dict) or not all(
+            isinstance(k, str) and isinstance(v, torch.Tensor) for k, v in state.items()):
+        raise CheckpointError(f"{path}: the weights are not a dictionary of tensors")
+    try:
+        with torch.device("meta"):
+            shapes = {k: tuple(v.shape)
+                      for k, v in PointDiffusionTransformer(cfg).state_dict().items()}
+    except (TypeError, RuntimeError, ValueError, ZeroDivisionError) as exc:
+        raise CheckpointError(f"{path}: its model description {cfg} is not a model "
+                              f"({exc.__class__.__name__})") from exc
+    got = {k: tuple(v.shape) for k, v in state.items()}
+    if got != shapes:
+        raise CheckpointError(f"{path}: weights do not match the model they describe")
+    for k, v in state.items():
+        if v.is_floating_point() and not bool(torch.isfinite(v).all()):
+            raise CheckpointError(f"{path}: the weights hold NaN or infinite values ({k})")
+
+
+def check_meta(path: Path, meta: dict) -> None:
+    """The entries of a weights file read besides the weights: ``schedule`` (a noise schedule
+    as :meth:`NoiseSchedule.config` writes it) and ``train_config`` (a dictionary whose
+    ``corpus`` is an integer >= 1)."""
+    saved = meta.get("schedule")
+    if saved is not None:
+        if not isinstance(saved, dict) or not isinstance(saved.get("T", 1024), int) or \
+                isinstance(saved.get("T"), bool) or not 1 <= saved.get("T", 1024) <= MAX_SIZE:
+            raise CheckpointError(f"{path}: not a noise schedule: {saved!r}"[:200])
+        try:
+            schedule = NoiseSchedule.from_config(saved)
+            ok = bool(torch.isfinite(schedule.abar).all() and (schedule.abar > 0).all())
+        except (InputError, TypeError, ValueError, RuntimeError) as exc:
+            raise CheckpointError(f"{path}: not a noise schedule: {saved!r}"[:200]) from exc
+        if not ok:
+            raise CheckpointError(f"{path}: not a usable noise schedule: {saved!r}"[:200])
+    train = meta.get("train_config", meta)
+    if not isinstance(train, dict):
+        raise CheckpointError(f"{path}: train_config is not a dictionary")
+    corpus = train.get("corpus", 1)
+    if isinstance(corpus, bool) or not isinstance(corpus, int) or corpus < 1:
+        raise CheckpointError(f"{path}: the corpus version must be an integer >= 1, not "
+                              f"{corpus!r}")
 
 
 @dataclass
