@@ -15,6 +15,10 @@ import pytest
 
 from dbtool.sim import frontend
 
+# the memoized front end is applied only to the Taichi releases it was tested against
+on_a_tested_taichi = pytest.mark.skipif(frontend.taichi_version() not in frontend.TESTED,
+                                   reason="the running Taichi keeps its own front end")
+
 
 def _sample(a, b):
     """A function whose nodes span one and several lines, compound statements included."""
@@ -36,6 +40,7 @@ def _context(fn, utils):
         file=inspect.getsourcefile(fn), global_vars={})
 
 
+@on_a_tested_taichi
 def test_source_excerpts_are_taichis_own():
     from taichi.lang.ast import ast_transformer_utils as utils
 
@@ -57,6 +62,7 @@ def test_source_excerpts_are_taichis_own():
     assert memo(ctx, twin) == original(ctx, twin) != memo(ctx2, same)
 
 
+@on_a_tested_taichi
 def test_call_stacks_are_taichis_own():
     from taichi.lang import matrix, util
 
@@ -96,6 +102,7 @@ print(json.dumps({"fast": frontend._INSTALLED["done"], "x": np.asarray(x).tolist
 """
 
 
+@on_a_tested_taichi
 @pytest.mark.skipif(sys.platform != "linux", reason="offline-cache file layout")
 def test_the_compiled_kernels_are_the_same(tmp_path):
     """Kernels compiled by Taichi's own front end into a fresh offline cache are all found
@@ -116,3 +123,53 @@ def test_the_compiled_kernels_are_the_same(tmp_path):
     assert (slow["fast"], fast["fast"]) == (False, True)
     assert len(slow["files"]) >= 5 and fast["files"] == slow["files"]
     assert fast["x"] == slow["x"]
+
+
+def _restore_taichi_afterwards(monkeypatch) -> None:
+    """Every Taichi attribute :func:`frontend.install` replaces is put back after the test, and
+    the install starts afresh (as in a new process)."""
+    from taichi.lang import _ndarray, impl, kernel_impl, matrix, util
+    from taichi.lang.ast import ast_transformer_utils as utils
+
+    targets = [(utils.ASTTransformerContext, "get_pos_info"), (kernel_impl, "getsourcelines"),
+               (kernel_impl, "getsourcefile"), (kernel_impl, "textwrap")]
+    targets += [(mod, "get_traceback") for mod in (util, impl, matrix, _ndarray)
+                if hasattr(mod, "get_traceback")]
+    for obj, name in targets:
+        monkeypatch.setattr(obj, name, getattr(obj, name))
+    monkeypatch.setattr(frontend, "_INSTALLED", {})
+    monkeypatch.delenv("DBTOOL_FAST_FRONTEND", raising=False)
+
+
+@pytest.mark.parametrize("version", [(1, 7, 3), (1, 8, 0), "1.9.1"])
+def test_another_taichi_keeps_its_own_front_end_and_says_so_once(monkeypatch, version):
+    import taichi
+    from taichi.lang import kernel_impl
+    from taichi.lang.ast import ast_transformer_utils as utils
+
+    _restore_taichi_afterwards(monkeypatch)
+    monkeypatch.setattr(taichi, "__version__", version)
+    lines, pos = kernel_impl.getsourcelines, utils.ASTTransformerContext.get_pos_info
+    shown = ".".join(map(str, version)) if isinstance(version, tuple) else version
+    with pytest.warns(RuntimeWarning, match=rf"Taichi {shown} is not a release .* \(1\.7\.4\)"
+                      ) as caught:
+        assert frontend.install() is False
+        assert frontend.install() is False  # decided once per process
+    assert len(caught) == 1
+    assert kernel_impl.getsourcelines is lines and utils.ASTTransformerContext.get_pos_info is pos
+
+
+@on_a_tested_taichi
+def test_a_tested_taichi_gets_the_memoized_front_end_without_a_word(monkeypatch):
+    import warnings
+
+    import taichi
+    from taichi.lang import kernel_impl
+
+    _restore_taichi_afterwards(monkeypatch)
+    monkeypatch.setattr(taichi, "__version__", frontend.TESTED[0])
+    lines = kernel_impl.getsourcelines
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert frontend.install() is True
+    assert kernel_impl.getsourcelines is not lines

@@ -36,7 +36,7 @@ def _substep_adjoint(sp: Stepper, adj: Adjoint, s: int, r: Region) -> list[Call]
     return [g2p, (KA.grid_op_grad, (
         adj.scratch, g.m, g.vin, adj.grid, sp.boxes, g.clamp, adj.oscratch, g.om, g.ovin, g.r0,
         g.o0, g.gm, g.og, adj.ogrid, adj.ngrid, s, sp.chunks, *sp.dims, *r, sc.dx, m.dt,
-        sc.gravity, sc.ground_y, sc.friction, sc.damp(m.dt), multi, mu_c)),
+        sc.gravity, sc.ground_y, sc.friction, multi, mu_c)),
         (KA.p2g_grad[obj], (*st, *b.stress, adj.grid, adj.ogrid, adj.ngrid, *adj.p2g, s, n,
                             *sp.dims, *r, *sp.consts, multi))]
 

@@ -16,8 +16,10 @@ string arguments. The same goes for the formatted call stack every new ndarray r
 compute graph's placeholders are thousands of them), memoized by the frames' code and line.
 The IR, the debug strings handed to the compiler and hence the offline-cache keys and the
 compiled code are unchanged; only repeated Python work goes. It is applied once, before the
-first kernel compiles, and only to a Taichi whose internals have the expected shape (otherwise
-nothing is changed). ``DBTOOL_FAST_FRONTEND=0`` leaves Taichi's front end as it is.
+first kernel compiles, and only to the Taichi releases it was tested against (:data:`TESTED`,
+by ``tests/test_frontend.py``) whose internals have the expected shape; another release keeps
+Taichi's own front end, and a warning says so once per process. ``DBTOOL_FAST_FRONTEND=0``
+leaves Taichi's front end as it is.
 """
 
 from __future__ import annotations
@@ -27,7 +29,10 @@ import functools
 import os
 import sys
 import textwrap
+import warnings
 
+# Taichi releases whose front-end internals the memoization was checked against
+TESTED: tuple[tuple[int, int, int], ...] = ((1, 7, 4),)
 _INSTALLED: dict[str, bool] = {}
 _COMPOUND = ("For", "While", "FunctionDef", "If")  # their excerpt stops before the body
 
@@ -54,12 +59,35 @@ class _Textwrap:
         return getattr(textwrap, name)
 
 
+def taichi_version() -> tuple[int, ...]:
+    """The running Taichi's release, e.g. ``(1, 7, 4)`` (``taichi.__version__`` is a tuple in
+    Taichi 1.x; a version string is read too)."""
+    import taichi
+
+    version = taichi.__version__
+    if isinstance(version, str):
+        version = version.split("+")[0].split(".")
+    return tuple(int(part) for part in tuple(version)[:3])
+
+
 def install() -> bool:
     """Memoize the front end's source excerpts and source lookups; ``True`` when applied."""
     if "done" in _INSTALLED:
         return _INSTALLED["done"]
     if os.environ.get("DBTOOL_FAST_FRONTEND", "1") == "0":
         _INSTALLED["done"] = False
+        return False
+    try:
+        version = taichi_version()
+    except (ImportError, AttributeError, TypeError, ValueError):
+        version = ()
+    if version not in TESTED:
+        _INSTALLED["done"] = False
+        shown = ".".join(map(str, version)) or "of unknown version"
+        tested = ", ".join(".".join(map(str, v)) for v in TESTED)
+        warnings.warn(f"Taichi {shown} is not a release dbtool's faster front end was tested "
+                      f"against ({tested}): using Taichi's own (same kernels, slower "
+                      "compilation)", RuntimeWarning, stacklevel=2)
         return False
     try:
         from taichi.lang import _ndarray, impl, kernel_impl, matrix, util

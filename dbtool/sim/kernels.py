@@ -7,20 +7,22 @@ hand-written adjoints are in :mod:`dbtool.sim.kernels_adjoint`.
 A substep is ``stress -> p2g -> grid_op -> g2p``:
 
 * ``stress`` (inside ``p2g``): deformation-gradient update and the APIC affine matrix
-  ``A = -dt V0 (4/dx^2) presence tau + m C`` with the compressible neo-Hookean Kirchhoff stress
-  ``tau = mu (F F^T - I) + lam J (J - 1) I`` and the muscle term ``-a k F d d^T F^T`` along the
-  particle's actuator direction ``d`` (positive ``a`` extends the material along ``d``),
-  ``k = act_strength * E``.
+  ``A = -dt V0 (4/dx^2) presence tau + c_s m C`` with the compressible neo-Hookean Kirchhoff
+  stress ``tau = mu (F F^T - I) + lam J (J - 1) I`` and the muscle term ``-a k F d d^T F^T``
+  along the particle's actuator direction ``d`` (positive ``a`` extends the material along
+  ``d``), ``k = act_strength * E``.
 * ``p2g`` / ``g2p``: quadratic B-spline transfers. ``p2g`` scatters the particle's momentum
-  times its damping factor ``damp`` (``exp(-c dt)`` for a material damping rate ``c``; 1 for
-  undamped particles, exactly the undamped arithmetic). On the CPU the scatter runs in ``chunks``
-  contiguous particle ranges, one per thread, each into its own copy of the grid with plain
-  (non-atomic) adds; ``grid_op`` sums the copies.
-* ``grid_op``: momentum to velocity (times a damping factor, 1 unless the scene sets a
-  damping rate), gravity, ground and box colliders with Coulomb friction, domain walls, and
-  the clamp: a kinematic boundary that holds every node a glued particle's stencil touches
-  at rest (no slip), so what hangs from a glued part is held by the grid it shares with it.
-  Works on the active region ``[lo, hi)`` of the grid only.
+  ``m v`` times its damping factor ``damp`` (``exp(-c dt)`` for a material damping rate ``c``)
+  and the scene's factor ``c_s`` (``scene_damp``, ``exp(-c dt)`` for the scene's
+  mass-proportional rate), and its affine momentum ``m C`` times ``c_s``. The stress impulse
+  and gravity are not damped, so static equilibria do not depend on either rate. Both factors
+  are 1 without damping, exactly the undamped arithmetic. On the CPU the scatter runs in
+  ``chunks`` contiguous particle ranges, one per thread, each into its own copy of the grid
+  with plain (non-atomic) adds; ``grid_op`` sums the copies.
+* ``grid_op``: momentum to velocity, gravity, ground and box colliders with Coulomb friction,
+  domain walls, and the clamp: a kinematic boundary that holds every node a glued particle's
+  stencil touches at rest (no slip), so what hangs from a glued part is held by the grid it
+  shares with it. Works on the active region ``[lo, hi)`` of the grid only.
 * Contact (``multi``): a task object with its own velocity field scatters into and gathers
   from its own grid arrays; where it moves into the robot at a node, the contact of
   :mod:`dbtool.sim.boundaries` removes
@@ -113,11 +115,13 @@ def _tau_unit(Fn, u, a, nu, act_strength):
 
 
 @ti.func
-def _stress(Cp, Fn, ph, e, a, d, dx, dt, p_vol, p_rho, nu, act_strength):
-    """The APIC affine matrix of a particle with ``F[s+1] = Fn``."""
+def _stress(Cp, Fn, ph, e, a, d, dx, dt, p_vol, p_rho, nu, act_strength, scene_damp):
+    """The APIC affine matrix of a particle with ``F[s+1] = Fn``: the stress impulse and the
+    affine momentum, the latter damped by the scene's factor ``scene_damp``."""
     inv_dx = 1.0 / dx
     tau = e * _tau_unit(Fn, Fn @ d, a, nu, act_strength)
-    return (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * tau + (p_rho * p_vol * ph) * Cp
+    return (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * tau \
+        + (p_rho * p_vol * ph * scene_damp) * Cp
 
 
 @ti.kernel
@@ -157,7 +161,8 @@ def _p2g_particle(
     stiffness: ti.template(), actp: ti.template(), direction: ti.template(), damp: ti.template(),
     field: ti.template(), scratch: ti.template(), oscratch: ti.template(),
     nscratch: ti.template(), xscratch: ti.template(), s, so, p, c, ny, nz, nxyz, lo, hi, blo,
-    bhi, dx, dt, p_vol, p_rho, nu, act_strength, multi: ti.template(), atomic: ti.template(),
+    bhi, dx, dt, p_vol, p_rho, nu, act_strength, scene_damp, multi: ti.template(),
+    atomic: ti.template(),
 ):
     Cp = C[s, p]
     Fn = (ti.Matrix.identity(float, 3) + dt * Cp) @ F[s, p]
@@ -170,9 +175,9 @@ def _p2g_particle(
     # still moves with the grid and its F is kept, for its presence adjoint.
     if ph != 0.0 or obj:
         Ap = _stress(Cp, Fn, ph, stiffness[p], actp[p], direction[p], dx, dt, p_vol, p_rho, nu,
-                     act_strength)
+                     act_strength, scene_damp)
         _p2g_scatter(x, v, presence, damp, scratch, oscratch, nscratch, xscratch, Ap, obj, s, p, c,
-                     ny, nz, nxyz, lo, hi, blo, bhi, dx, p_rho, p_vol, multi, atomic)
+                     ny, nz, nxyz, lo, hi, blo, bhi, dx, p_rho, p_vol, scene_damp, multi, atomic)
 
 
 @ti.func
@@ -180,9 +185,10 @@ def _p2g_scatter(
     x: ti.template(), v: ti.template(), presence: ti.template(), damp: ti.template(),
     scratch: ti.template(), oscratch: ti.template(), nscratch: ti.template(),
     xscratch: ti.template(), Ap, obj, s, p, c, ny, nz, nxyz, lo, hi, blo, bhi, dx, p_rho,
-    p_vol, multi: ti.template(), atomic: ti.template(),
+    p_vol, scene_damp, multi: ti.template(), atomic: ti.template(),
 ):
-    """Mass and APIC momentum of particle ``p`` onto its 27 nodes; with ``multi`` a robot
+    """Mass and APIC momentum of particle ``p`` onto its 27 nodes (``m v`` times the material
+    and the scene's damping factors; ``Ap`` holds the affine part); with ``multi`` a robot
     particle whose first stencil node lies in ``[blo, bhi]`` (the contact box) also scatters its
     mass-weighted position."""
     m_unit = p_rho * p_vol
@@ -192,7 +198,7 @@ def _p2g_scatter(
     fx = xp * inv_dx - ti.cast(base, float)
     w, dw = _weights(fx)
     m = m_unit * presence[p]
-    mv = (m * damp[p]) * v[s, p]
+    mv = (m * damp[p] * scene_damp) * v[s, p]
     b = _node(c, base[0], base[1], base[2], ny, nz, nxyz)
     near = True  # can this particle's stencil share a node with the object's?
     if ti.static(multi):
@@ -244,7 +250,7 @@ def _p2g_kernels(multi: bool) -> tuple:
         s: ti.i32, so: ti.i32, n: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
         lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, cbox: nd(),
         dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
-        multi: ti.i32,
+        scene_damp: float, multi: ti.i32,
     ):
         """Stress, then scatter of mass and APIC momentum; ``chunks`` particle ranges go into
         separate grid copies with plain adds (one range per CPU thread). With ``multi`` the
@@ -263,7 +269,8 @@ def _p2g_kernels(multi: bool) -> tuple:
                 _p2g_particle(x, v, C, F, presence, stiffness, actp, direction, damp, field,
                               scratch, oscratch,
                               nscratch, xscratch, s, so, p, c, ny, nz, nx * ny * nz, lo, hi,
-                              blo, bhi, dx, dt, p_vol, p_rho, nu, act_strength, multi_, False)
+                              blo, bhi, dx, dt, p_vol, p_rho, nu, act_strength, scene_damp,
+                              multi_, False)
 
     @ti.kernel
     def p2g_atomic(
@@ -272,7 +279,8 @@ def _p2g_kernels(multi: bool) -> tuple:
         damp: nd(), field: nd(), scratch: nd(), oscratch: nd(), nscratch: nd(), xscratch: nd(),
         s: ti.i32, so: ti.i32, n: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32, lx: ti.i32,
         ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32, cbox: nd(), dx: float,
-        dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float, multi: ti.i32,
+        dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
+        scene_damp: float, multi: ti.i32,
     ):
         """Massively parallel variant of :func:`p2g` (GPU): one grid copy, atomic adds."""
         lo, hi = ti.Vector([lx, ly, lz]), ti.Vector([hx, hy, hz])
@@ -282,7 +290,8 @@ def _p2g_kernels(multi: bool) -> tuple:
             _p2g_particle(x, v, C, F, presence, stiffness, actp, direction, damp, field, scratch,
                           oscratch,
                           nscratch, xscratch, s, so, p, 0, ny, nz, nx * ny * nz, lo, hi, blo,
-                          bhi, dx, dt, p_vol, p_rho, nu, act_strength, multi_, True)
+                          bhi, dx, dt, p_vol, p_rho, nu, act_strength, scene_damp, multi_,
+                          True)
 
     return p2g, p2g_atomic
 
@@ -300,11 +309,10 @@ def grid_op(
     grid_ov: nd(), grid_r0: nd(), grid_o0: nd(), grid_gm: nd(), grid_og: nd(),
     gs: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
-    dx: float, dt: float, gravity: float, ground_y: float, mu_f: float, damp: float,
-    multi: ti.i32, mu_c: float,
+    dx: float, dt: float, gravity: float, ground_y: float, mu_f: float, multi: ti.i32,
+    mu_c: float,
 ):
     """Sum the p2g copies (and clear them), then velocity update and boundary conditions;
-    ``damp`` scales the velocity each substep (mass-proportional damping; 1 = none);
     ``clamp`` is 1 at the clamped nodes (their velocity is zero) and 0 elsewhere. With
     ``multi`` the object field gets the same update, then robot and object meet by
     :func:`_contact` (friction ``mu_c``) before the boundary conditions; ``grid_r0``,
@@ -326,7 +334,7 @@ def grid_op(
         vin = ti.Vector([0.0, 0.0, 0.0])
         vout = ti.Vector([0.0, 0.0, 0.0])
         if m > 0.0:
-            vin = ti.Vector([acc[0], acc[1], acc[2]]) / m * damp
+            vin = ti.Vector([acc[0], acc[1], acc[2]]) / m
             vin[1] -= dt * gravity
         if multi != 0:
             oacc = ti.Vector([0.0, 0.0, 0.0, 0.0])
@@ -354,7 +362,7 @@ def grid_op(
             vo = ti.Vector([0.0, 0.0, 0.0])
             voout = ti.Vector([0.0, 0.0, 0.0])
             if mo > 0.0:
-                vo = ti.Vector([oacc[0], oacc[1], oacc[2]]) / mo * damp
+                vo = ti.Vector([oacc[0], oacc[1], oacc[2]]) / mo
                 vo[1] -= dt * gravity
             grid_r0[on] = vin
             grid_o0[on] = vo

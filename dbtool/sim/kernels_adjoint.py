@@ -36,7 +36,8 @@ def _cofactor(M):
 
 
 @ti.func
-def _stress_vjp(Cp, Fp, e, a, d, ph, G, gFn, dx, dt, p_vol, p_rho, nu, act_strength):
+def _stress_vjp(Cp, Fp, e, a, d, ph, G, gFn, dx, dt, p_vol, p_rho, nu, act_strength,
+                scene_damp):
     """Adjoint of :func:`_stress` for the affine-matrix adjoint ``G`` and the ``F[s+1]``
     adjoint ``gFn``. Returns the adjoints of ``C[s]``, ``F[s]``, ``presence``, ``stiffness`` and
     ``a``."""
@@ -46,7 +47,7 @@ def _stress_vjp(Cp, Fp, e, a, d, ph, G, gFn, dx, dt, p_vol, p_rho, nu, act_stren
     u = Fn @ d
     tu = _tau_unit(Fn, u, a, nu, act_strength)
     alpha = -dt * p_vol * 4.0 / (dx * dx)
-    beta = p_rho * p_vol
+    beta = p_rho * p_vol * scene_damp  # the affine momentum per unit presence and C
     H = (alpha * ph) * G  # d L / d tau
     g_ph = (G * (alpha * e * tu + beta * Cp)).sum()
     g_e = (H * tu).sum()
@@ -91,7 +92,7 @@ def _hessian_vjp(w, dw, g, i: ti.template(), j: ti.template(), k: ti.template())
 
 @ti.func
 def _absent_presence_vjp(ggrid: ti.template(), w, fx, vp, Cp, tu, e, base, ny, nz, dx, dt, p_vol,
-                    p_rho):
+                         p_rho, scene_damp):
     """The two terms of ``dL/dpresence`` (through the mass and through ``A``; ``tu`` is the unit
     stress of :func:`~dbtool.sim.kernels._tau_unit`) of a robot particle whose presence is 0
     (no mass, no stress, so no other adjoint): the p2g adjoint's node gather and
@@ -116,7 +117,7 @@ def _absent_presence_vjp(ggrid: ti.template(), w, fx, vp, Cp, tu, e, base, ny, n
                 gm += wt * (g.dot(vp) + gg[3])
     G = dx * (ti.Matrix.cols([so0, so1, so2]) - sg.outer_product(fx))
     alpha = -dt * p_vol * 4.0 / (dx * dx)
-    return gm, (G * (alpha * e * tu + p_rho * p_vol * Cp)).sum()
+    return gm, (G * (alpha * e * tu + (p_rho * p_vol * scene_damp) * Cp)).sum()
 
 
 def _p2g_grad_kernel(multi: bool):
@@ -133,7 +134,7 @@ def _p2g_grad_kernel(multi: bool):
         s: ti.i32, n: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
         lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
         dx: float, dt: float, p_vol: float, p_rho: float, nu: float, act_strength: float,
-        multi: ti.i32,
+        scene_damp: float, multi: ti.i32,
     ):
         """Adjoint of :func:`p2g` (scatter and stress): gather the node adjoints
         ``ggrid = (dL/d mv, dL/d m)`` (``oggrid`` for an object particle with ``multi``, and the
@@ -153,7 +154,7 @@ def _p2g_grad_kernel(multi: bool):
             a = actp[p]
             d = direction[p]
             m = m_unit * ph
-            vp = damp[p] * v[s, p]  # the scattered velocity (momentum / m)
+            vp = (damp[p] * scene_damp) * v[s, p]  # the scattered velocity (momentum / m)
             Cp = C[s, p]
             Fp = F[s, p]
             Fn = (ti.Matrix.identity(float, 3) + dt * Cp) @ Fp
@@ -163,14 +164,15 @@ def _p2g_grad_kernel(multi: bool):
                 obj = field[p] > 0.0
             if ph == 0.0 and not obj and ti.abs(Fg[s + 1, p]).max() == 0.0:
                 # an absent particle: only its presence adjoint is not zero
-                gm0, g_ph0 = _absent_presence_vjp(ggrid, w, fx, vp, Cp, tu, e, base, ny, nz, dx, dt,
-                                             p_vol, p_rho)
+                gm0, g_ph0 = _absent_presence_vjp(ggrid, w, fx, vp, Cp, tu, e, base, ny, nz, dx,
+                                                  dt, p_vol, p_rho, scene_damp)
                 presenceg[p] = presenceg[p] + m_unit * gm0 + g_ph0
                 vg[s, p] = ti.Vector([0.0, 0.0, 0.0])
                 Cg[s, p] = ti.Matrix.zero(float, 3, 3)
                 Fg[s, p] = ti.Matrix.zero(float, 3, 3)
                 continue
-            Ap = (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * (e * tu) + (m_unit * ph) * Cp
+            Ap = (-dt * p_vol * 4.0 * inv_dx * inv_dx * ph) * (e * tu) \
+                + (m_unit * ph * scene_damp) * Cp
             # dpos = (off - fx) dx, so A dpos = dx (A off - A fx) and every sum over the nodes of
             # something times dpos splits into a sum with the constant offsets and one with fx;
             # A off = i A[:, 0] + j A[:, 1] + k A[:, 2] is built up along the loops.
@@ -215,10 +217,10 @@ def _p2g_grad_kernel(multi: bool):
                                 sh += _hessian_vjp(w, dw, gn, i, j, k)
             sgo = ti.Matrix.cols([so0, so1, so2])
             xg[s, p] = xg[s, p] + inv_dx * sc - Ap.transpose() @ sg + (m * inv_dx * inv_dx) * sh
-            vg[s, p] = (m * damp[p]) * sg
+            vg[s, p] = (m * damp[p] * scene_damp) * sg
             G = dx * (sgo - sg.outer_product(fx))  # d L / d A
             g_C, g_F, g_ph, g_e, g_a = _stress_vjp(Cp, Fp, e, a, d, ph, G, Fg[s + 1, p], dx, dt,
-                                                   p_vol, p_rho, nu, act_strength)
+                                                   p_vol, p_rho, nu, act_strength, scene_damp)
             Cg[s, p] = g_C
             Fg[s, p] = g_F
             presenceg[p] = presenceg[p] + m_unit * gm + g_ph
@@ -232,11 +234,11 @@ p2g_grad = {m: _p2g_grad_kernel(m) for m in (False, True)}  # ``p2g_grad[multi]`
 
 
 @ti.func
-def _update_vjp(vin, m, g, dt, gravity, damp):
-    """``(dL/d mv, dL/d m)`` of ``vin = c mv / m - dt g e_y`` for the ``vin`` adjoint ``g``:
-    ``dL/dmv = c g / m``, ``dL/dm = -g . (c mv / m) / m``."""
+def _update_vjp(vin, m, g, dt, gravity):
+    """``(dL/d mv, dL/d m)`` of ``vin = mv / m - dt g e_y`` for the ``vin`` adjoint ``g``:
+    ``dL/dmv = g / m``, ``dL/dm = -g . (mv / m) / m``."""
     vm = vin + ti.Vector([0.0, dt * gravity, 0.0])
-    gd = g / m * damp
+    gd = g / m
     return ti.Vector([gd[0], gd[1], gd[2], -g.dot(vm) / m])
 
 
@@ -247,8 +249,8 @@ def grid_op_grad(
     grid_gm: nd(), grid_og: nd(), oggrid: nd(), ngrid: nd(),
     s: ti.i32, chunks: ti.i32, nx: ti.i32, ny: ti.i32, nz: ti.i32,
     lx: ti.i32, ly: ti.i32, lz: ti.i32, hx: ti.i32, hy: ti.i32, hz: ti.i32,
-    dx: float, dt: float, gravity: float, ground_y: float, mu_f: float, damp: float,
-    multi: ti.i32, mu_c: float,
+    dx: float, dt: float, gravity: float, ground_y: float, mu_f: float, multi: ti.i32,
+    mu_c: float,
 ):
     """Adjoint of :func:`grid_op`: ``ggrid = (dL/d mv, dL/d m)`` from the g2p adjoints (and
     with ``multi`` the object field's ``oggrid`` and the adjoint ``ngrid`` of its mass
@@ -287,13 +289,13 @@ def grid_op_grad(
                                                     g, go)
             oout = ti.Vector([0.0, 0.0, 0.0, 0.0])
             if mo > 0.0:
-                oout = _update_vjp(vo, mo, go, dt, gravity, damp)
+                oout = _update_vjp(vo, mo, go, dt, gravity)
                 oout[3] += gmo
             oggrid[o] = oout
             ngrid[o] = ggm
         out = ti.Vector([0.0, 0.0, 0.0, 0.0])
         if m > 0.0:
-            out = _update_vjp(vr, m, g, dt, gravity, damp)
+            out = _update_vjp(vr, m, g, dt, gravity)
             out[3] += gmr
         ggrid[o] = out
 

@@ -20,10 +20,12 @@ class Scene:
 
     ``size`` is the domain extent (x, y = gravity axis, z), its origin at 0; ``boxes`` are static
     colliders ``(center, half_extent)``; the ground is the plane ``y = ground_y`` with Coulomb
-    friction coefficient ``friction``; ``damping`` is a mass-proportional damping rate (0 for
-    every task). ``object_friction`` set gives the particles marked ``field`` 1 (a task's
-    object) their own grid velocity field, meeting the robot's through frictional contact
-    with that Coulomb coefficient; ``None`` keeps one shared field (MLS-MPM's usual coupling).
+    friction coefficient ``friction``; ``damping`` is a mass-proportional damping rate of every
+    particle's momentum (0 for every task; stress and gravity are not damped, so static
+    equilibria do not depend on it). ``object_friction`` set gives the particles marked
+    ``field`` 1 (a task's object) their own grid velocity field, meeting the robot's through
+    frictional contact with that Coulomb coefficient; ``None`` keeps one shared field
+    (MLS-MPM's usual coupling).
     """
 
     size: tuple[float, float, float]
@@ -38,7 +40,7 @@ class Scene:
     object_friction: float | None = None
 
     def damp(self, dt: float) -> float:
-        """Velocity factor per substep of the mass-proportional ``damping`` rate (1/time):
+        """Momentum factor per substep of the mass-proportional ``damping`` rate (1/time):
         ``exp(-damping dt)``; 1 (no damping) for every task, used by quasi-static protocols."""
         return math.exp(-self.damping * dt) if self.damping else 1.0
 

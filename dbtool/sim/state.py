@@ -240,7 +240,8 @@ class Adjoint:
 @dataclass(frozen=True)
 class Constants:
     """Scalars of the transfer kernels: grid spacing, substep, particle volume, density,
-    Poisson ratio and muscle strength (iteration gives them in the kernels' order)."""
+    Poisson ratio, muscle strength and the scene's momentum damping factor per substep
+    (:meth:`~dbtool.sim.model.Scene.damp`; iteration gives them in the kernels' order)."""
 
     dx: float
     dt: float
@@ -248,6 +249,7 @@ class Constants:
     p_rho: float
     nu: float
     act_strength: float
+    scene_damp: float = 1.0
 
     def __iter__(self) -> Iterator[float]:
         return iter(astuple(self))

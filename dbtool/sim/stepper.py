@@ -63,7 +63,8 @@ class Stepper:
         p_vol = (scene.dx * 0.5) ** 3
         self.consts = Constants(dx=scene.dx, dt=material.dt, p_vol=p_vol,
                                 p_rho=material.density, nu=material.nu,
-                                act_strength=material.act_strength)
+                                act_strength=material.act_strength,
+                                scene_damp=scene.damp(material.dt))
         self.boxes = pool(dtype, (MAX_BOXES, 6))
         # bounds reduction: one row per CPU thread; on a GPU, rows of a few thousand particles
         self.bound_chunks = 256 if atomic else chunks
@@ -134,8 +135,7 @@ class Stepper:
             calls.append((contact_box, (st.x, s, *self.object_span, *r, sc.dx, self.cbox)))
         calls += [p2g, (K.grid_op, (
             g.scratch, g.m, g.vin, g.v, self.boxes, g.clamp, *g.objects, gs, self.chunks,
-            *self.dims, *r, sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction, sc.damp(m.dt),
-            multi, mu_c))]
+            *self.dims, *r, sc.dx, m.dt, sc.gravity, sc.ground_y, sc.friction, multi, mu_c))]
         if not last:
             calls.append((K.g2p[obj], (st.x, st.v, st.C, g.v, self.body.glued,
                                        self.body.field, g.ov, s, so, gs, self.n, *self.dims, *r,
