@@ -151,7 +151,8 @@ class RunFolderError(InputError):
 
 class RunFolder:
     """A run folder this process writes: checked (:func:`check_run_dir`), created and locked
-    (:class:`~dbtool.lock.FolderLock`) until :meth:`release` or :meth:`abandon`.
+    (:class:`~dbtool.lock.FolderLock`) until :meth:`release` or :meth:`abandon`. ``check=False``:
+    the caller has already judged the folder its own (a run it resumes) and only locks it.
 
     Example::
 
@@ -165,17 +166,18 @@ class RunFolder:
     """
 
     def __init__(self, path: str | Path, kind: str, own: bool = True,
-                 option: str = "--run-dir") -> None:
+                 option: str = "--run-dir", check: bool = True) -> None:
         from dbtool.lock import FolderLock, stale_note
 
-        self.path = check_run_dir(path, kind, own, option)
+        self.path = check_run_dir(path, kind, own, option) if check else Path(path)
         self.kind = kind
         self.made = [p for p in (self.path, *self.path.parents) if not p.exists()]
         self.path.mkdir(parents=True, exist_ok=True)
         self.lock = FolderLock(self.path / LOCK_NAME, self.path)
         try:
             self.lock.acquire()
-            check_run_dir(self.path, kind, own, option)  # again, now that no one else writes
+            if check:
+                check_run_dir(self.path, kind, own, option)  # again, now no one else writes
         except BaseException:
             self.lock.release()
             self._remove_made()

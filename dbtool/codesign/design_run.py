@@ -283,9 +283,6 @@ class DesignRun:
             raise RunDirectoryError(f"{path} is not a dbtool run directory (no config.json)")
         if not ck_path.is_file():
             raise RunDirectoryError(f"{path} has no checkpoint to resume from ({CHECKPOINT})")
-        from dbtool.runs import RunFolder
-
-        folder = RunFolder(path, "design", option="--resume")
         try:
             ck = torch.load(ck_path, map_location="cpu", weights_only=True)
             if not isinstance(ck, dict) or ck.get("format") != FORMAT:
@@ -313,16 +310,14 @@ class DesignRun:
             if ck.get("partial") is not None:
                 run.state.partial = ChainState.from_dict(ck["partial"])
         except RunDirectoryError:
-            folder.release()
             raise
         except Exception as exc:  # noqa: BLE001 - any damage gets the same one-line error
-            folder.release()
             raise RunDirectoryError(f"corrupt checkpoint {ck_path} ({exc.__class__.__name__}: "
                                     f"{str(exc)[:80]})") from None
-        except BaseException:
-            folder.release()
-            raise
-        run.folder = folder
+        from dbtool.runs import RunFolder
+
+        # the checkpoint shows the folder is a design run: lock it while the run continues
+        run.folder = RunFolder(path, "design", option="--resume", check=False)
         return run
 
     # ------------------------------------------------------------------ work
