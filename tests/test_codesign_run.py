@@ -157,7 +157,9 @@ class Interrupt(KeyboardInterrupt):
 
 def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp_path,
                                                                       monkeypatch):
-    monkeypatch.setattr(run_mod, "preset", _small_preset)  # for the runs and the resume
+    import dbtool.codesign.config as config_mod
+
+    monkeypatch.setattr(config_mod, "preset", _small_preset)  # for the runs and the resume
     a = DesignRun(tmp_path / "a", _settings(), prior)
     a.start("cpu")
     da = a.run(show_progress=False)

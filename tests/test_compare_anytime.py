@@ -17,7 +17,7 @@ def _cell(root: Path, method: str, task: str, seed: int, rows: list[dict], **rec
     (folder / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
     (folder / "cell.json").write_text(json.dumps({"method": method, "task": task, "seed": seed,
                                                   "status": "done", "budget_units": 20,
-                                                  **rec}))
+                                                  "metric": rows[-1]["metric"], **rec}))
 
 
 def test_best_so_far_is_a_running_maximum_of_what_each_row_found():

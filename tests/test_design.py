@@ -39,8 +39,8 @@ def test_missing_and_inconsistent(tmp_path):
     d = _design()
     arrays = d.arrays()
     arrays["controller"] = np.zeros((100, 3))
-    np.savez(tmp_path / "x.npz", header=np.array('{"format": "dbtool.design/1", "task": "c"}'),
-             **arrays)
+    header = '{"format": "dbtool.design/1", "task": "crawling"}'
+    np.savez(tmp_path / "x.npz", header=np.array(header), **arrays)
     with pytest.raises(DesignFileError, match="controller"):
         Design.load(tmp_path / "x.npz")
     arrays = d.arrays()

@@ -8,13 +8,14 @@ import numpy as np
 import pytest
 
 from dbtool.design import Design
-from dbtool.sim.robot import Robot
+from dbtool.robotize.actuators import reference_robot
+from dbtool.sim.tasks import get_task
 
 
 def _run(folder, task: str, metric: float, epochs: list[float]) -> None:
-    n = 4
-    robot = Robot(np.zeros((n, 3)), np.ones(n), np.ones(n), np.ones((n, 1)), np.eye(3)[:1])
-    Design(task, robot, np.zeros((10, 1)), metrics={task: metric}).save(folder / "design.npz")
+    spec = get_task(task)
+    Design(task, reference_robot(spec, "box"), spec.controller(10),
+           metrics={task: metric}).save(folder / "design.npz")
     rows = [{"phase": "embedding", "epoch": k, "mean": m} for k, m in enumerate(epochs)]
     (folder / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
     (folder / "manifest.json").write_text(json.dumps({"commit": "abc"}))

@@ -6,12 +6,12 @@ from pathlib import Path
 
 import typer
 
-from dbtool.cli.common import OneLineErrors, ProgressBar, command_line, guarded
+from dbtool.cli.common import OneLineErrors, ProgressBar, guarded
 from dbtool.cli.compare import compare_command
+from dbtool.cli.design import design_command
 from dbtool.cli.export import export_command
 from dbtool.cli.prior import prior_app
 from dbtool.cli.realgap import realgap_app
-from dbtool.codesign.config import PROMPT_T_MIN
 from dbtool.inputs import MAX_SEED, MAX_STEPS
 from dbtool.sim.task_names import NAMES
 
@@ -68,85 +68,7 @@ def simulate(
         typer.echo(f"animation: {res.animation}")
 
 
-@app.command()
-def design(
-    task: str = typer.Argument(..., help=TASK_NAMES),
-    preset: str = typer.Option("quick", help="quick (minutes on a laptop CPU) | paper "
-                                             "(Tables 4-5)"),
-    prompt: str = typer.Option(None, help="text feedback composed with the optimised "
-                                          "embedding, e.g. 'a star' (docs/method.md §6)"),
-    prompt_guidance: float = typer.Option(3.0, help="guidance weight of --prompt"),
-    prompt_t_min: int = typer.Option(PROMPT_T_MIN, min=0, max=1024,
-                                     help="--prompt guides the diffusion steps with t >= this "
-                                          "(0: every step)"),
-    start: str = typer.Option(None, help="prompt the embedding starts from (default: null)"),
-    seed: int = typer.Option(0, min=0, max=MAX_SEED, help="seed of the whole run"),
-    epochs: int = typer.Option(None, min=0, max=10_000,
-                               help="embedding epochs (default: the preset's)"),
-    samples: int = typer.Option(None, min=1, max=10_000,
-                                help="co-designed samples (default: preset's)"),
-    kappa: float = typer.Option(None, min=0, help="physics weight (default: Table 5's)"),
-    steps: int = typer.Option(100, min=1, max=MAX_STEPS, help="control steps per episode"),
-    run_dir: Path = typer.Option(None, "--run-dir",
-                                 help="run directory (default runs/design-TASK-TIME)"),
-    resume: Path = typer.Option(None, help="continue the run in this directory"),
-    method: str = typer.Option("diffusebot", help="diffusebot | particle (the baseline)"),
-    iterations: int = typer.Option(4, min=0, max=100_000,
-                                   help="particle baseline: gradient steps"),
-    arch: str = typer.Option("cpu", help="cpu | cuda | auto"),
-    report: bool = typer.Option(True, "--report/--no-report",
-                                help="write report.html (docs/viewing.md)"),
-    prior: int = typer.Option(None, "--prior", min=1, help="shipped prior version (default: "
-                              "the default, docs/prior.md)"),
-) -> None:
-    """Breed a robot for TASK (DiffuseBot: embedding optimisation, then diffusion as
-    co-design) and save design.npz, metrics and figures in a resumable run directory."""
-    from dbtool.baselines.run import check_method
-    from dbtool.cli.common import particle_design
-    from dbtool.codesign.design_run import Settings
-    from dbtool.codesign.launch import open_design_run
-    from dbtool.prior.sampling.generate import far_prompt_note
-    from dbtool.sim.tasks import get_task
-
-    with guarded():
-        if check_method(method) == "particle":
-            return particle_design(task, iterations, steps, seed, arch, run_dir, report)
-        run = open_design_run(Settings(get_task(task).name, preset, seed, epochs, start, prompt,
-                                       prompt_guidance, samples, kappa, None, steps,
-                                       prompt_t_min=prompt_t_min, prior=prior), run_dir, resume,
-                              arch)
-        try:
-            for text in filter(None, (run.settings.prompt, run.settings.start)):
-                note = far_prompt_note(text, getattr(run.prior, "corpus", 1))
-                if note:
-                    typer.echo(note, err=True)
-            if resume is not None:
-                part = run.state.partial
-                typer.echo(f"resuming {resume} at epoch {run.state.epoch}, "
-                           f"{len(run.state.samples)} co-designed samples done"
-                           + ("" if part is None else f", the next one at its stop t = {part.t}"))
-            typer.echo(f"run directory: {run.path}")
-            result = run.run(show_progress=True, report=report)
-        except KeyboardInterrupt:
-            run.close(ok=False)  # a run with no checkpoint leaves nothing behind
-            if run.saved_work():
-                typer.echo(f"interrupted; continue with: dbtool design {run.settings.task} "
-                           f"--resume {run.path}", err=True)
-            else:
-                typer.echo("interrupted before the first checkpoint: nothing to resume (what it "
-                           "wrote was removed); start again with: "
-                           f"{command_line(f'dbtool design {run.settings.task}')}",
-                           err=True)
-            raise typer.Exit(code=130) from None
-        except BaseException:
-            run.close(ok=False)
-            raise
-    metric = result.metrics[run.task.name]
-    typer.echo(f"{run.task.name}: final metric = {metric:.6f} "
-               f"(from {result.meta.get('source', 'co-design')})")
-    typer.echo(f"design:  {run.path / 'design.npz'}")
-    if report:
-        typer.echo(f"report:  {run.path / 'report.html'}")
+app.command("design")(design_command)
 
 
 @app.command("view")

@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from dbtool.errors import InputError
+from dbtool.sim.task_names import N_STEPS
 from dbtool.sim.task_names import NAMES as TASKS
 
 # the string settings and the values each takes (a typo is an error, not another branch)
@@ -150,3 +151,60 @@ def drift_budget(cfg: CodesignConfig) -> float:
 
     betas = schedule_for("base").betas
     return cfg.K * float(sum(betas[t] for t in range(cfg.t_max, cfg.t_min - 1, -cfg.dt)))
+
+
+@dataclass
+class Settings:
+    """What the user asked for (``dbtool design`` options)."""
+
+    task: str
+    preset: str = "quick"
+    seed: int = 0
+    epochs: int | None = None  # None: the preset's
+    start: str | None = None  # prompt c starts from; None: the null embedding
+    prompt: str | None = None  # text feedback (docs/method.md §6)
+    prompt_guidance: float = 3.0
+    samples: int | None = None  # co-designed samples; None: the preset's
+    kappa: float | None = None  # override Table 5's kappa (0: the ablation)
+    gamma: float | None = None  # override Table 5's gamma
+    n_steps: int = N_STEPS
+    prompt_t_min: int = PROMPT_T_MIN  # the prompt guides the steps with t >= this (0: all)
+    samples_per_epoch: int | None = None  # designs per embedding epoch; None: the preset's
+    sample_steps: int | None = None  # denoising steps per design; None: the preset's
+    prior: int | None = None  # shipped prior version; None: the default (recorded at start)
+
+    def check(self) -> None:
+        """Refuse settings no run can use (:class:`~dbtool.errors.InputError`, one line),
+        before anything is loaded or written."""
+        from dbtool.inputs import MAX_STEPS, check_count, check_finite, check_seed, check_text
+
+        check_seed(self.seed)
+        check_count("steps", self.n_steps, 1, MAX_STEPS)
+        for name, value in (("prompt", self.prompt), ("start", self.start)):
+            if value is not None:
+                check_text(f"--{name}", value)
+        check_finite("--prompt-guidance", self.prompt_guidance)
+        if self.kappa is not None:
+            check_finite("--kappa", self.kappa, low=0.0)
+        if self.gamma is not None:
+            check_finite("gamma", self.gamma, low=0.0)
+
+    def configs(self) -> tuple[EmbeddingConfig, CodesignConfig]:
+        self.check()
+        if self.preset not in PRESETS:
+            raise InputError(f"unknown preset {self.preset!r}; choose one of {', '.join(PRESETS)}")
+        emb, cod = preset(self.preset, self.task)
+        if self.epochs is not None:
+            emb = replace(emb, epochs=self.epochs)
+        if self.samples_per_epoch is not None:  # the buffer keeps as many epochs as before
+            s = self.samples_per_epoch
+            emb = replace(emb, samples_per_epoch=s, min_buffer=min(emb.min_buffer, s),
+                          buffer_size=s * max(1, emb.buffer_size // emb.samples_per_epoch),
+                          top_k=min(emb.top_k, s), batch_size=min(emb.batch_size, s))
+        if self.sample_steps is not None:
+            emb = replace(emb, sample_steps=self.sample_steps)
+        if self.kappa is not None:
+            cod = replace(cod, kappa=self.kappa)
+        if self.gamma is not None:
+            cod = replace(cod, gamma=self.gamma)
+        return emb, cod

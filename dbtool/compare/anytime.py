@@ -100,6 +100,18 @@ def on_grid(units: np.ndarray, best: np.ndarray, grid: np.ndarray) -> np.ndarray
     return out.astype(float)
 
 
+def check_cell(folder: Path) -> dict | None:
+    """:func:`~dbtool.compare.cells.read_cell`, and for a done cell its ``metrics.jsonl`` as
+    the anytime curves read it (:func:`cell_curve`): what ``--resume`` reads of a finished
+    cell, checked before it writes anything."""
+    from dbtool.compare.cells import read_cell
+
+    rec = read_cell(folder)
+    if rec is not None and rec["status"] == "done" and (Path(folder) / "metrics.jsonl").is_file():
+        cell_curve(Path(folder), rec)
+    return rec
+
+
 def curves(out_dir: str | Path) -> dict:
     """Per task and method: the grid of units, the mean best-so-far over seeds, its min and
     max, the seeds counted and whether any curve was reconstructed. Done cells only."""

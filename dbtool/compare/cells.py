@@ -86,18 +86,6 @@ def read_cell(folder: Path) -> dict | None:
     return rec
 
 
-def check_cell(folder: Path) -> dict | None:
-    """:func:`read_cell`, and for a done cell its ``metrics.jsonl`` as the anytime curves read
-    it (:func:`dbtool.compare.anytime.cell_curve`): what ``--resume`` reads of a finished
-    cell, checked before it writes anything."""
-    rec = read_cell(folder)
-    if rec is not None and rec["status"] == "done" and (Path(folder) / "metrics.jsonl").is_file():
-        from dbtool.compare.anytime import cell_curve
-
-        cell_curve(Path(folder), rec)
-    return rec
-
-
 def read_compare_json(path: str | Path, resume: bool = False) -> dict:
     """A comparison's ``compare.json`` checked (the one place ``report``, ``view`` and
     ``compare --resume`` read it): a JSON object with a ``dbtool.compare/`` format and its

@@ -22,14 +22,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dbtool.atomic import atomic_write_text
+from dbtool.compare.anytime import check_cell
 from dbtool.compare.budget import get_budget
-from dbtool.compare.cells import (
-    CellSpec,
-    check_cell,
-    copy_cell,
-    read_cell,
-    read_compare_json,
-)
+from dbtool.compare.cells import CellSpec, copy_cell, read_cell, read_compare_json
 from dbtool.compare.executors import check_executor, execute
 from dbtool.compare.methods import METHODS, seeded
 from dbtool.errors import InputError

@@ -92,6 +92,9 @@ def check_export_target(design: str | Path, target: str | Path) -> Path:
     either new, empty or a finished export holding only its own files (which the new export
     replaces as a whole). Raises :class:`~dbtool.errors.InputError` otherwise."""
     design, target = Path(design).resolve(), Path(target)
+    for above in reversed(target.parents):  # outermost first: name the file that is in the way
+        if above.exists() and not above.is_dir():
+            raise InputError(f"cannot make the folder {target}: {above} is a file")
     where = target.resolve()
     if where == design.parent or where in design.parents:
         raise InputError(f"the export would replace {target}, the folder that holds its input "

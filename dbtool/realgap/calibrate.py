@@ -21,14 +21,10 @@ import numpy as np
 from scipy.optimize import minimize
 
 from dbtool.realgap.log import TipLog
-from dbtool.realgap.protocol import Bench, TendonParams
+from dbtool.realgap.protocol import BOUNDS, Bench, TendonParams
 from dbtool.sim.simulator import SimulationError
 
 FIT = ("gain", "stiffness_scale", "friction_mm")  # the parameters fitted by default
-# beyond these the bench's explicit steps are no longer stable (stiffness x4 with the mass
-# scaling is a CFL number of 0.44) or the strain cap is reached
-BOUNDS = {"gain": (0.2, 5.0), "stiffness_scale": (0.25, 4.0), "friction_mm": (0.0, 5.0),
-          "slack_mm": (0.0, 5.0)}
 
 
 class _Spent(Exception):

@@ -28,6 +28,11 @@ from dbtool.sim.simulator import Material, Particles, Simulator
 from dbtool.sim.tasks import get_task
 from dbtool.sim.tasks.base import DX, SPACING
 
+# the calibration's search range: beyond these the bench's explicit steps are no longer stable
+# (stiffness x4 with the mass scaling is a CFL number of 0.44) or the strain cap is reached
+BOUNDS = {"gain": (0.2, 5.0), "stiffness_scale": (0.25, 4.0), "friction_mm": (0.0, 5.0),
+          "slack_mm": (0.0, 5.0)}
+
 MM_PER_UNIT = 1000.0  # the export's scale: a 60 x 72.5 x 42.5 mm finger
 
 
@@ -101,10 +106,8 @@ class TendonParams:
 
     def warnings(self) -> list[str]:
         """A line for each value outside the range the calibration searches (where the bench
-        is known to be stable: :data:`dbtool.realgap.calibrate.BOUNDS`); legal, but the
+        is known to be stable: :data:`BOUNDS`); legal, but the
         simulation may blow up or the strain cap may flatten the curves."""
-        from dbtool.realgap.calibrate import BOUNDS
-
         return [f"{name} {getattr(self, name):g} is outside {lo:g} .. {hi:g}, the range in "
                 "which the tendon bench is known to be stable" + (
                     " (the simulation may blow up)" if name == "stiffness_scale" else "")

@@ -7,3 +7,4 @@ it without importing the simulator (its help texts are built before any command 
 TITLES = {"balancing": "Balancing", "landing": "Landing", "crawling": "Crawling",
           "hurdling": "Hurdling", "gripping": "Gripping", "box": "Moving a box"}
 NAMES = tuple(TITLES)
+N_STEPS = 100  # every task's episode: 100 control steps (of the simulator's substeps)

@@ -13,13 +13,12 @@ from dbtool.sim.boundaries import BOUND
 from dbtool.sim.kernels import MAX_GROUPS
 from dbtool.sim.robot import Robot
 from dbtool.sim.simulator import SUBSTEPS, Material, Particles, Scene  # noqa: F401 (re-exported)
-from dbtool.sim.task_names import TITLES
+from dbtool.sim.task_names import N_STEPS, TITLES  # noqa: F401 - N_STEPS re-exported
 
 DX = 0.005  # grid spacing: the 0.08 workspace spans 16 cells
 SPACING = DX / 2  # particle spacing: 8 particles per cell
 GROUND = BOUND * DX  # the ground plane sits on top of the bottom wall
 OBJECT_STIFFNESS = 1e5  # the cube / box is a stiff elastic body
-N_STEPS = 100  # every task: 100 control steps of SUBSTEPS (the simulator's) substeps
 
 
 class DetachedError(InputError):
