@@ -443,9 +443,12 @@ def test_evaluation_on_the_attribute_corpus():
     assert 0 <= fam["accuracy"] <= 1 and 0 <= fam["ceiling"] <= 1
 
 
+@pytest.mark.slow
 def test_compiled_training_trains_the_same_model(tmp_path):
     """``compile=True`` runs the step through torch.compile; the weights it saves are the
-    plain model's and match eager training to float tolerance."""
+    plain model's and match eager training to float tolerance. Slow: Inductor's first
+    compile of the step takes about two minutes of one core (a maintainer's training option,
+    not on the design path)."""
     cfg = TrainConfig(kind="base", steps=2, batch=2, subset=16, per_family=1, ckpt_every=2,
                       log_every=1, warmup=1, bf16=False, model=ModelConfig(**TINY))
     corpus = tmp_path / "corpus"
