@@ -34,10 +34,29 @@ def atomic_write(path: str | Path, save: Callable[[str], object]) -> Path:
         save(tmp)
         os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
+    except Exception as exc:
+        raise _renamed(exc, tmp, path) from None
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
     return path
+
+
+def _renamed(exc: Exception, tmp: str | Path, path: Path) -> Exception:
+    """``exc`` as the user should see it: naming ``path``, not the temporary ``tmp`` it was
+    being written to (a user's error, or a file-system error, of the same kind)."""
+    from dbtool.errors import DbtoolError
+
+    if isinstance(exc, OSError) and not isinstance(exc, DbtoolError) and (
+            exc.filename is None or str(tmp) in str(exc.filename)):
+        why = exc.strerror or str(exc).replace(str(tmp), str(path))
+        return PathError(f"cannot write {path}: {why}")
+    if isinstance(exc, DbtoolError) and str(tmp) in str(exc):
+        try:
+            return type(exc)(str(exc).replace(str(tmp), str(path)))
+        except TypeError:  # pragma: no cover - an error class with other arguments
+            return exc
+    return exc
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
@@ -79,6 +98,9 @@ def atomic_folder(path: str | Path) -> Iterator[Path]:
             shutil.rmtree(old, ignore_errors=True)
         else:
             tmp.rename(path)
+    except Exception as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise _renamed(exc, tmp, path) from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -210,3 +210,21 @@ def test_ctrl_c_before_the_first_checkpoint_leaves_nothing_and_says_so(tmp_path)
     assert "nothing to resume" in err and "--resume" not in err, err
     assert "start again with: dbtool design crawling --steps 4 --run-dir r" in err, err
     assert not (tmp_path / "r").exists()
+
+
+def test_errors_name_the_file_not_its_temporary_name(tmp_path):
+    """A failure while a file or folder is written names the final path the user asked for,
+    never the hidden temporary one."""
+    from dbtool.atomic import atomic_folder, atomic_write
+    from dbtool.errors import InputError, PathError
+
+    def full(tmp):
+        raise OSError(28, "No space left on device", tmp)
+
+    with pytest.raises(PathError) as info:
+        atomic_write(tmp_path / "design.npz", full)
+    assert str(info.value) == f"cannot write {tmp_path / 'design.npz'}: No space left on device"
+    with pytest.raises(InputError) as info, atomic_folder(tmp_path / "export") as tmp:
+        raise InputError(f"{tmp / 'report.json'} is not valid")
+    assert str(info.value) == f"{tmp_path / 'export' / 'report.json'} is not valid"
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # no temporary file or folder
