@@ -228,3 +228,18 @@ def test_errors_name_the_file_not_its_temporary_name(tmp_path):
         raise InputError(f"{tmp / 'report.json'} is not valid")
     assert str(info.value) == f"{tmp_path / 'export' / 'report.json'} is not valid"
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # no temporary file or folder
+
+
+def test_report_refuses_a_run_another_process_writes(tmp_path):
+    folder = tmp_path / "run"
+    holder = _holder(folder, "design")
+    try:
+        task = get_task("crawling")
+        Design("crawling", reference_robot(task, "box"), task.controller()).save(
+            folder / "design.npz")
+        before = snapshot(tmp_path)
+        out = run_cli("report", "run", cwd=tmp_path)
+        assert_refused(out, tmp_path, before, "being written by", f"process {holder.pid}")
+    finally:
+        holder.kill()
+        holder.wait()
