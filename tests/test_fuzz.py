@@ -11,7 +11,7 @@ from dbtool.sim.simulator import SimulationError
 from dbtool.sim.tasks import TASKS, get_task
 from dbtool.sim.tasks.base import SPACING, DetachedError
 
-BODIES = 20  # per task: 120 random bodies across the six tasks
+BODIES = 14  # per task: 84 random bodies across the six tasks
 CHUNKS = 2  # each task's bodies in two tests, so a failure names a smaller batch
 
 
