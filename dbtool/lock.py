@@ -128,6 +128,23 @@ class FolderLock:
             pass
 
 
+def check_free(path: str | Path, folder: str | Path | None = None) -> None:
+    """Raise :class:`FolderLockedError` when a live process holds the lock file ``path``;
+    creates nothing (a folder no one has locked has no lock file, or a stale one)."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        raise FolderLockedError(
+            f"{Path(folder) if folder is not None else Path(path).parent} is being written by "
+            f"{describe(_read(Path(path)))}; wait for it to finish") from None
+    finally:
+        os.close(fd)
+
+
 def stale_note(lock: FolderLock) -> str | None:
     """The note to print when ``lock`` took over a dead process's lock."""
     if lock.stale is None:

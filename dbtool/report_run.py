@@ -120,24 +120,24 @@ def report_run(path: str | Path) -> Path:
     """Write ``report.html`` for PATH: an export folder's (its parts, tendons and assembly
     sheet), a comparison folder's (its table, figures and robots), or beside the design of a
     run directory or design file; returns its path. The folder is locked while the page is
-    written (:mod:`dbtool.lock`): a run or export that another process writes is refused."""
-    from dbtool.lock import LOCK_NAME, FolderLock
+    written: a run, export or comparison that another process writes is refused
+    (:func:`dbtool.lock.check_free`)."""
+    from dbtool.lock import LOCK_NAME, check_free
 
     kind = path_kind(path)
     path = Path(path)
     if kind == "export":
         from dbtool.export.reports.page import write_export_page
 
-        with FolderLock(path.parent / f".{path.name}.lock", path):
-            return write_export_page(path)
+        check_free(path.parent / f".{path.name}.lock", path)
+        return write_export_page(path)
     if kind == "comparison":
         from dbtool.compare.page import write_comparison_page
 
-        with FolderLock(path / LOCK_NAME, path):
-            return write_comparison_page(path)
+        check_free(path / LOCK_NAME, path)
+        return write_comparison_page(path)
     if kind == "run":
-        with FolderLock(path / LOCK_NAME, path):
-            return _design_report(path)
+        check_free(path / LOCK_NAME, path)
     return _design_report(path)
 
 
