@@ -66,7 +66,8 @@ class Design:
         return check_design_file(path, task)
 
 
-PRIOR_METHODS = ("diffusebot", "prior", "dpsr")  # designs from the prior carry its surface
+# designs from the prior carry its surface
+PRIOR_METHODS = ("diffusebot", "prior", "dpsr", "embedding", "codesign", "diffusebot-paper")
 
 
 def _header(raw: np.ndarray, where: str) -> dict:

@@ -138,10 +138,10 @@ def _settings(**kw):
 
 def _small_preset(name: str, task: str):
     """The preset at test size: epochs of 3 designs (the buffer trains from the first epoch),
-    16 sampler steps, co-design stops at t = 400, 200, 0."""
+    16 sampler steps, co-design stops at t = 400, 200, 0, then two refinement steps."""
     emb, cod = preset(name, task)
     return (replace(emb, samples_per_epoch=3, min_buffer=3, top_k=2, batch_size=2,
-                    sample_steps=16), replace(cod, dt=200))
+                    sample_steps=16), replace(cod, dt=200, refine=2))
 
 
 def test_a_run_records_its_priors_guidance_interval(prior, tmp_path, monkeypatch):
@@ -184,6 +184,10 @@ def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp
     # the checkpoint of epoch 0 holds a trained embedding and Adam state, which resume restores
     assert all(r["loss"] is not None for r in rows if r["phase"] == "embedding")
     assert any(r["phase"] == "codesign" and "physics_rms" in r for r in rows)
+    # co-design from the elite: two refinement steps from the best design so far
+    steps = [r for r in rows if r["phase"] == "refine"]
+    assert [r.get("k") for r in steps] == [0, 1, None] and steps[-1]["final"]
+    assert all(np.isfinite(r["metric"]) and len(r["search"]) == 3 for r in steps[:2])
     back = Design.load(tmp_path / "a" / "design.npz")
     assert back.surface.shape == (4096, 3) and back.task == "gripping"
     assert back.metrics["gripping"] == pytest.approx(da.metrics["gripping"])
@@ -230,6 +234,18 @@ def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp
     assert dc.metrics["gripping"] == da.metrics["gripping"]
     np.testing.assert_array_equal(dc.surface, da.surface)
     assert [json.loads(line) for line in (tmp_path / "c" / "metrics.jsonl").open()] == rows
+
+    # paused after the chain's three stops and the first refinement step: the checkpoint holds
+    # the unfinished refinement, and the resumed run ends where the uninterrupted one did
+    e = DesignRun(tmp_path / "e", _settings(), prior)
+    e.start("cpu")
+    assert e.run(show_progress=False, pause_after_stops=4) is None
+    re_ = DesignRun.resume(tmp_path / "e", prior)
+    assert re_.state.refine.k == 1 and len(re_.state.samples) == 1
+    de = re_.run(show_progress=False)
+    assert de.metrics["gripping"] == da.metrics["gripping"] and de.meta == da.meta
+    np.testing.assert_array_equal(de.surface, da.surface)
+    assert [json.loads(line) for line in (tmp_path / "e" / "metrics.jsonl").open()] == rows
 
     # a finished run refuses to be overwritten
     with pytest.raises(RunDirectoryError, match="already holds a run"):
@@ -305,6 +321,9 @@ def test_quick_preset_keeps_the_paper_schedules_drift_and_controller_budgets():
         assert n_steps(quick) < n_steps(paper)
         assert drift_budget(quick) * quick.step_scale == pytest.approx(drift_budget(paper))
         assert quick.gamma * n_steps(quick) == pytest.approx(paper.gamma * n_steps(paper))
+        assert quick.refine_gamma * quick.refine == pytest.approx(paper.gamma * n_steps(paper))
+        assert (quick.samples, quick.refine) == (0, 10)  # co-design from the elite
+        assert (preset("paper", task)[1].samples, preset("paper", task)[1].refine) == (4, 0)
         assert preset("paper", task)[1].step_scale == 1.0
 
 

@@ -35,7 +35,8 @@ def expand_list_options(argv: list[str]) -> list[str]:
 def compare_command(
     tasks: list[str] = typer.Option(None, "--tasks", help="tasks (default: all six)"),
     methods: list[str] = typer.Option(None, "--methods", help="particle, voxel, implicit, "
-                                      "cppn, prior, diffusebot or all (default: all)"),
+                                      "cppn, prior, diffusebot or all (default: all); the "
+                                      "ablation: embedding, codesign, diffusebot-paper"),
     seeds: list[int] = typer.Option(None, "--seeds", help="seeds (default: 0)"),
     budget: str = typer.Option(None, help="smoke, quick, standard or paper (default quick)"),
     executor: str = typer.Option("serial", help="serial, local (processes here) or ray"),

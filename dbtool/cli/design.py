@@ -44,6 +44,15 @@ def design_command(
                                 help="write report.html (docs/viewing.md)"),
     prior: int = typer.Option(None, "--prior", min=1, help="shipped prior version (default: "
                               "the default, docs/prior.md)"),
+    executor: str = typer.Option("serial", help="where each epoch's designs are scored: "
+                                 "serial, local (worker processes) or ray (docs/cluster.md); "
+                                 "the result does not depend on it"),
+    workers: int = typer.Option(2, min=1, max=4096, help="worker processes (local) or CPUs "
+                                "of a private Ray instance"),
+    address: str = typer.Option(None, help="Ray cluster to join: HOST:PORT or auto"),
+    threads: int = typer.Option(None, min=1, max=1024, help="simulator threads here and in "
+                                "each worker (default: DBTOOL_THREADS or the CPU count; 1 "
+                                "with --executor local or ray)"),
 ) -> None:
     """Breed a robot for TASK (DiffuseBot: embedding optimisation, then diffusion as
     co-design) and save design.npz, metrics and figures in a resumable run directory."""
@@ -51,16 +60,20 @@ def design_command(
     from dbtool.cli.common import particle_design
     from dbtool.codesign.design_run import Settings
     from dbtool.codesign.launch import open_design_run
+    from dbtool.compare.scoring import Scorer
     from dbtool.prior.sampling.generate import far_prompt_note
     from dbtool.sim.tasks import get_task
 
     with guarded():
         if check_method(method) == "particle":
             return particle_design(task, iterations, steps, seed, arch, run_dir, report)
+        if executor != "serial" and threads is None:
+            threads = 1
+        scorer = Scorer(executor, workers, threads or 1, arch, address)
         run = open_design_run(Settings(get_task(task).name, preset, seed, epochs, start, prompt,
                                        prompt_guidance, samples, kappa, None, steps,
                                        prompt_t_min=prompt_t_min, prior=prior), run_dir, resume,
-                              arch)
+                              arch, threads, scorer)
         try:
             for text in filter(None, (run.settings.prompt, run.settings.start)):
                 note = far_prompt_note(text, getattr(run.prior, "corpus", 1))
@@ -87,6 +100,8 @@ def design_command(
         except BaseException:
             run.close(ok=False)
             raise
+        finally:
+            scorer.close()
     metric = result.metrics[run.task.name]
     typer.echo(f"{run.task.name}: final metric = {metric:.6f} "
                f"(from {result.meta.get('source', 'co-design')})")

@@ -81,6 +81,11 @@ class CodesignConfig:
     gradient: str = "scored"
     search: tuple[float, ...] = (0.02, 0.04, 0.08)
     handover: str = "best"
+    # co-design from the elite (dbtool/codesign/refine.py): after the ``samples`` fresh ones,
+    # the best design so far is refined by ``refine`` steps at t = 0, the controller by
+    # ``refine_gamma`` per step
+    refine: int = 0
+    refine_gamma: float = 0.0
 
     def __post_init__(self) -> None:
         _choice("target", self.target, TARGETS)
@@ -125,10 +130,14 @@ def preset(name: str, task: str) -> tuple[EmbeddingConfig, CodesignConfig]:
         ratio = emb.buffer_size // emb.samples_per_epoch  # epochs the buffer remembers
         emb = replace(emb, samples_per_epoch=12, min_buffer=12, buffer_size=12 * ratio,
                       top_k=3, batch_size=4, train_iters=4, epochs=4, sample_steps=32)
-        cod = replace(cod, dt=100, K=1, samples=2)
+        # fresh samples (on request) take five stops; co-design from the elite takes ten
+        # refinement steps, the units of the two fresh samples the preset took before
+        # (docs/method.md §5); both rescale the paper's drift budget
         paper = TABLE5[task]
+        cod = replace(cod, dt=100, K=1, samples=0, refine=10)
         cod = replace(cod, step_scale=drift_budget(paper) / drift_budget(cod),
-                      gamma=paper.gamma * n_steps(paper) / n_steps(cod))
+                      gamma=paper.gamma * n_steps(paper) / n_steps(cod),
+                      refine_gamma=paper.gamma * n_steps(paper) / cod.refine)
     return emb, cod
 
 
@@ -164,7 +173,8 @@ class Settings:
     start: str | None = None  # prompt c starts from; None: the null embedding
     prompt: str | None = None  # text feedback (docs/method.md §6)
     prompt_guidance: float = 3.0
-    samples: int | None = None  # co-designed samples; None: the preset's
+    samples: int | None = None  # fresh co-designed samples; None: the preset's
+    refine: int | None = None  # refinement steps of the best design; None: the preset's
     kappa: float | None = None  # override Table 5's kappa (0: the ablation)
     gamma: float | None = None  # override Table 5's gamma
     n_steps: int = N_STEPS
@@ -184,6 +194,8 @@ class Settings:
             if value is not None:
                 check_text(f"--{name}", value)
         check_finite("--prompt-guidance", self.prompt_guidance)
+        if self.refine is not None:
+            check_count("--refine", self.refine, 0, 100_000)
         if self.kappa is not None:
             check_finite("--kappa", self.kappa, low=0.0)
         if self.gamma is not None:
@@ -203,6 +215,10 @@ class Settings:
                           top_k=min(emb.top_k, s), batch_size=min(emb.batch_size, s))
         if self.sample_steps is not None:
             emb = replace(emb, sample_steps=self.sample_steps)
+        if self.refine is not None:
+            paper = TABLE5[self.task]
+            cod = replace(cod, refine=self.refine, refine_gamma=paper.gamma * n_steps(paper)
+                          / max(1, self.refine))
         if self.kappa is not None:
             cod = replace(cod, kappa=self.kappa)
         if self.gamma is not None:

@@ -34,6 +34,7 @@ from dbtool.atomic import atomic_write, atomic_write_text
 from dbtool.codesign.config import PROMPT_T_MIN, CodesignConfig, Settings
 from dbtool.codesign.embedding import EmbeddingOptimiser, score
 from dbtool.codesign.langevin import ChainState, codesign_sample
+from dbtool.codesign.refine import RefineConfig, RefineState, refine
 from dbtool.errors import InputError, RunError
 from dbtool.sim.tasks import N_STEPS, Task, get_task
 
@@ -94,6 +95,7 @@ class State:
     rows: list[dict] = field(default_factory=list)
     samples: list[dict] = field(default_factory=list)  # finished co-design samples
     partial: ChainState | None = None  # the unfinished sample's chain after its last stop
+    refine: RefineState | None = None  # the unfinished refinement after its last step
 
 
 class Paused(Exception):  # noqa: N818 - not an error: the run stopped where it was asked to
@@ -111,7 +113,7 @@ def _savez(path: Path, **arrays) -> Path:
 class DesignRun:
     """A run directory and the optimiser state behind it."""
 
-    def __init__(self, path: str | Path, settings: Settings, prior=None) -> None:
+    def __init__(self, path: str | Path, settings: Settings, prior=None, scorer=None) -> None:
         self.path = Path(path)
         self.folder = None  # the locked run folder (start, resume) until close
         self.settings = settings
@@ -125,7 +127,7 @@ class DesignRun:
         self.prior = prior
         start = prior.embed(settings.start) if settings.start else prior.null()
         self.opt = EmbeddingOptimiser(prior, self.task, self.emb_cfg, start, seed=settings.seed,
-                                      n_steps=settings.n_steps)
+                                      n_steps=settings.n_steps, scorer=scorer)
         self.state = State()
 
     # ------------------------------------------------------------------ files
@@ -199,9 +201,11 @@ class DesignRun:
                    "stop": -1 if s.get("stop") is None else int(s["stop"]),
                    "controller": None if s["controller"] is None
                    else torch.as_tensor(s["controller"]),
+                   **({"refined": s["refined"]} if "refined" in s else {}),
                    **({"trajectory": {k: torch.as_tensor(v) for k, v in s["trajectory"].items()}}
                       if s.get("trajectory") else {})} for s in self.state.samples],
-              "partial": None if self.state.partial is None else self.state.partial.to_dict()}
+              "partial": None if self.state.partial is None else self.state.partial.to_dict(),
+              "refine": None if self.state.refine is None else self.state.refine.to_dict()}
 
         def save(tmp: str) -> None:
             bio = io.BytesIO()
@@ -211,7 +215,7 @@ class DesignRun:
         atomic_write(self.path / CHECKPOINT, save)
 
     @classmethod
-    def resume(cls, path: str | Path, prior=None) -> DesignRun:
+    def resume(cls, path: str | Path, prior=None, scorer=None) -> DesignRun:
         """Reload a run directory from its checkpoint."""
         path = Path(path)
         ck_path = path / CHECKPOINT
@@ -225,7 +229,8 @@ class DesignRun:
                 raise RunDirectoryError(f"{ck_path} is not a dbtool run checkpoint")
             # runs from before the prompt window had the prompt on every step, and runs from
             # before the prior option sampled version 1
-            run = cls(path, Settings(**{"prompt_t_min": 0, "prior": 1, **ck["settings"]}), prior)
+            run = cls(path, Settings(**{"prompt_t_min": 0, "prior": 1, **ck["settings"]}), prior,
+                      scorer)
             o = run.opt
             o.embedding.load_state_dict(ck["embedding"])
             o.opt.load_state_dict(ck["adam"])
@@ -240,11 +245,14 @@ class DesignRun:
                 {"cloud": s["cloud"].numpy(), "metric": float(s["metric"]),
                  "stop": None if int(s.get("stop", -1)) < 0 else int(s["stop"]),
                  "controller": None if s["controller"] is None else s["controller"].numpy(),
+                 **({"refined": str(s["refined"])} if "refined" in s else {}),
                  **({"trajectory": {k: v.numpy() for k, v in s["trajectory"].items()}}
                     if "trajectory" in s else {})}
                 for s in ck["samples"]])
             if ck.get("partial") is not None:
                 run.state.partial = ChainState.from_dict(ck["partial"])
+            if ck.get("refine") is not None:
+                run.state.refine = RefineState.from_dict(ck["refine"])
         except RunDirectoryError:
             raise
         except Exception as exc:  # noqa: BLE001 - any damage gets the same one-line error
@@ -328,7 +336,53 @@ class DesignRun:
                 self._save_trajectory()
                 self.checkpoint()
                 bar.update(1)
+        if cod.refine > 0 and not any("refined" in s for s in self.state.samples):
+            try:
+                self._refine(cod, show_progress, stops_left)
+            except Paused:
+                return None
         return self.finish(report)
+
+    def _candidates(self) -> list[dict]:
+        """The designs the run can hand over: its finished samples and the epochs' best."""
+        ok = [dict(s, source=source(s)) for s in self.state.samples if np.isfinite(s["metric"])]
+        ok += [{"cloud": e.cloud, "metric": e.metric, "controller": None,
+                "source": f"embedding epoch {e.epoch}"} for e in self.opt.buffer.elite[:1]]
+        return ok
+
+    def _refine(self, cod: CodesignConfig, show_progress: bool, stops_left: list) -> None:
+        """Co-design from the elite (docs/method.md §5): the best design so far refined by
+        ``cod.refine`` steps at t = 0, checkpointed after each; it joins the samples."""
+        from tqdm import tqdm
+
+        cands = self._candidates()
+        if not cands:
+            return  # nothing to refine (no epoch, no sample): finish says so
+        start = max(cands, key=lambda c: c["metric"])
+        cfg = RefineConfig(steps=cod.refine, gamma=cod.refine_gamma)
+
+        def step_done(st: RefineState) -> None:
+            self.state.refine = st
+            self.checkpoint()
+            bar.update(1)
+            if stops_left[0] is not None:
+                stops_left[0] -= 1
+                if stops_left[0] <= 0:
+                    raise Paused
+
+        done = 0 if self.state.refine is None else self.state.refine.k
+        with tqdm(total=cod.refine, initial=done, desc="refinement steps", unit="step",
+                  disable=not show_progress or None, leave=False) as bar:
+            best = refine(self.task, start["cloud"], start["metric"], cfg,
+                          self.settings.n_steps, start["controller"],
+                          on_step=lambda r: self.log(phase="refine", **r),
+                          on_state=step_done, resume=self.state.refine)
+        self.state.refine = None
+        self.state.samples.append({"cloud": best["cloud"], "metric": best["metric"],
+                                   "controller": best["controller"], "stop": None,
+                                   "refined": f"{start['source']}, step {best['step']}"})
+        self.log(phase="refine", final=True, metric=best["metric"], step=best["step"])
+        self.checkpoint()
 
     def _save_best(self, n: int = 8) -> None:
         best = self.opt.buffer.elite[:n]
@@ -358,11 +412,7 @@ class DesignRun:
         from dbtool.sim.rollout import simulate
         from dbtool.viz.render import montage
 
-        ok = [dict(s, source=source(s)) for s in self.state.samples
-              if np.isfinite(s["metric"])]
-        elite = self.opt.buffer.elite[:1]
-        ok += [{"cloud": e.cloud, "metric": e.metric, "controller": None,
-                "source": f"embedding epoch {e.epoch}"} for e in elite]
+        ok = self._candidates()
         if not ok:
             raise RunError("no co-designed sample could be robotized and simulated")
         best = max(ok, key=lambda s: s["metric"])
@@ -392,6 +442,9 @@ class DesignRun:
 
 
 def source(sample: dict) -> str:
-    """Which stage made a co-designed sample: its final sample or the stop of the chain."""
+    """Which stage made a co-designed sample: its final sample or the stop of the chain, or
+    the refinement of the elite (what it started from and the step, -1: none improved)."""
+    if "refined" in sample:
+        return f"co-design from the elite ({sample['refined']})"
     stop = sample.get("stop")
     return "co-design (final sample)" if stop is None else f"co-design (stop t = {stop})"

@@ -193,6 +193,9 @@ class EmbeddingOptimiser:
     n_steps: int = N_STEPS
     epoch: int = 0
     history: list[dict] = field(default_factory=list)
+    # scores an epoch's designs (``score``'s signature): serial here, or in parallel workers
+    # (:class:`dbtool.compare.scoring.Scorer`), with the same results
+    scorer: Callable | None = None
 
     def __post_init__(self) -> None:
         for p in self.prior.base.parameters():
@@ -228,7 +231,7 @@ class EmbeddingOptimiser:
         cfg = self.cfg
         clouds, atoms = self.sample(cfg.samples_per_epoch,
                                     seed=self.seed * 100_003 + self.epoch)
-        metrics = score(clouds, self.task, self.n_steps, progress)
+        metrics = (self.scorer or score)(clouds, self.task, self.n_steps, progress)
         self.buffer.add(clouds, metrics, self.epoch, atoms)
         losses = []
         if len(self.buffer) >= cfg.min_buffer:

@@ -122,7 +122,7 @@ def read_compare_json(path: str | Path, resume: bool = False) -> dict:
         number(f"{path}: budget_settings.units", settings["units"], 0)
     if resume:
         from dbtool.compare.budget import get_budget
-        from dbtool.compare.methods import METHODS
+        from dbtool.compare.methods import KNOWN
         from dbtool.sim.tasks import TASKS
 
         if fmt != FORMAT:
@@ -135,9 +135,9 @@ def read_compare_json(path: str | Path, resume: bool = False) -> dict:
         except ValueError as exc:
             raise InputError(f"{path}: {exc}") from None
         for m, t, _ in cells:
-            if m not in METHODS:
+            if m not in KNOWN:
                 raise InputError(f"{path}: unknown method {m!r} (this dbtool runs "
-                                 f"{', '.join(METHODS)})")
+                                 f"{', '.join(KNOWN)})")
             if t not in TASKS:
                 raise InputError(f"{path}: unknown task {t!r} (this dbtool runs "
                                  f"{', '.join(TASKS)})")
@@ -218,7 +218,10 @@ def _work(spec: CellSpec, log) -> dict:
            meta).save(spec.folder / "design.npz")
     montage(ro.episode, ro.positions, spec.folder / "montage.png",
             title=f"{spec.method} / {task.title}: metric {ro.metric:.4g}")
-    return {"metric": float(ro.metric), "info": out.info or {}}
+    from dbtool.compare.motion import classify
+
+    return {"metric": float(ro.metric), "info": out.info or {},
+            "motion": classify(task.name, ro.episode, ro.positions)}
 
 
 def copy_cell(source: CellSpec, spec: CellSpec) -> dict:

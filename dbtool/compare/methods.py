@@ -7,8 +7,15 @@ cell's budget and handing back its final design: a robot and its open-loop contr
   uniform mixture over the null condition and the family captions), no embedding
   optimisation and no co-design; ``units - 1`` samples, each robotized and scored with the
   task's prescribed controller, the best kept;
-- ``diffusebot``: embedding optimisation then diffusion as co-design, sized to the budget by
-  :func:`diffusebot_plan`.
+- ``diffusebot``: embedding optimisation, then co-design from the elite (the best design of
+  the epochs refined at the last stop, :mod:`dbtool.codesign.refine`), sized to the budget by
+  :func:`diffusebot_plan`;
+- ``diffusebot-paper``: the algorithm as published, embedding optimisation then fresh
+  co-designed samples, sized by :func:`paper_plan`.
+
+Two more are the ablation of DiffuseBot's parts (docs/results.md, "Where the units go"):
+``embedding`` (all units on embedding epochs, the best design of the buffer) and ``codesign``
+(all units on one co-design chain from the starting embedding, no epochs).
 
 Every method ends with one forward evaluation of its final design (one unit).
 """
@@ -26,9 +33,13 @@ from dbtool.sim.robot import Robot
 from dbtool.sim.tasks import Task
 
 GRADIENT = ("particle", "voxel", "implicit", "cppn")
-METHODS = (*GRADIENT, "prior", "diffusebot")
+METHODS = (*GRADIENT, "prior", "diffusebot")  # the table of docs/results.md (``--methods all``)
+ABLATION = ("embedding", "codesign", "diffusebot-paper")  # DiffuseBot's parts, on request
+KNOWN = (*METHODS, *ABLATION)
 TITLES = {"particle": "particle", "voxel": "voxel", "implicit": "implicit fn",
-          "cppn": "diff-CPPN", "prior": "prior samples", "diffusebot": "DiffuseBot"}
+          "cppn": "diff-CPPN", "prior": "prior samples", "diffusebot": "DiffuseBot",
+          "embedding": "embedding only", "codesign": "co-design only",
+          "diffusebot-paper": "DiffuseBot (paper)"}
 
 _PRIOR: dict[str, object] = {}
 
@@ -74,7 +85,13 @@ def run_method(method: str, task: Task, budget: Budget, seed: int,
         return _prior_samples(task, budget, seed, log)
     if method == "diffusebot":
         return _diffusebot(task, budget, seed, log)
-    raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    if method == "diffusebot-paper":
+        return _diffusebot_paper(task, budget, seed, log)
+    if method == "embedding":
+        return _embedding_only(task, budget, seed, log)
+    if method == "codesign":
+        return _codesign_only(task, budget, seed, log)
+    raise InputError(f"unknown method {method!r}; choose one of {', '.join(KNOWN)}")
 
 
 def _gradient(method: str, task: Task, budget: Budget, seed: int, log) -> Outcome:
@@ -129,12 +146,12 @@ def _prior_samples(task: Task, budget: Budget, seed: int, log) -> Outcome:
                        {"samples": n, "best": i, "failed": int((~np.isfinite(metrics)).sum())})
 
 
-def diffusebot_plan(task: str, budget: Budget) -> dict:
-    """How DiffuseBot spends ``budget.units - 1`` units: the paper's Tables 4-5 when they fit,
-    otherwise half on co-design (one sample of ``s`` Langevin steps, each a gradient episode
-    and the line search's forward episodes (:func:`step_units`), plus its scoring episode) and
-    the rest on embedding epochs of ``S`` designs, about three times as many designs per epoch
-    as epochs (Table 4's 20 x 60)."""
+def paper_plan(task: str, budget: Budget) -> dict:
+    """How the published DiffuseBot spends ``budget.units - 1`` units: the paper's Tables
+    4-5 when they fit, otherwise half on co-design (one sample of ``s`` Langevin steps, each
+    a gradient episode and the line search's forward episodes (:func:`step_units`), plus
+    its scoring episode) and the rest on embedding epochs of ``S`` designs, about three
+    times as many designs per epoch as epochs (Table 4's 20 x 60)."""
     from dbtool.codesign.config import TABLE4, TABLE5, n_steps, step_units
 
     free = budget.units - 1
@@ -166,48 +183,170 @@ def diffusebot_plan(task: str, budget: Budget) -> dict:
             "planned_units": epochs * per_epoch + cd + 1}
 
 
-def diffusebot_configs(task: str, budget: Budget):
-    """The embedding and co-design configs of :func:`diffusebot_plan`: the preset's settings
-    with the plan's sizes; the Langevin stops are spread over ``[t_min, t_max]`` with K = 1
-    (a single stop with a line search sits at ``t_min``, where the x0-estimate is sharpest)
-    and the step scale and controller step rescaled to the paper's drift budget (as the
-    ``quick`` preset does)."""
+def _sized_epochs(task: str, budget: Budget, epochs: int, per_epoch: int,
+                  preset_name: str = "quick"):
+    """The preset's embedding config with ``epochs`` epochs of ``per_epoch`` designs (the
+    buffer remembers as many epochs as the preset's)."""
+    from dbtool.codesign.config import preset
+
+    emb, _ = preset(preset_name, task)
+    s = per_epoch
+    ratio = max(1, emb.buffer_size // emb.samples_per_epoch)
+    return replace(emb, samples_per_epoch=s, min_buffer=min(emb.min_buffer, s),
+                   buffer_size=s * ratio, top_k=min(emb.top_k, s),
+                   batch_size=min(emb.batch_size, s), epochs=epochs,
+                   sample_steps=budget.sample_steps)
+
+
+def chain_config(task: str, k: int, search: int):
+    """The quick preset's co-design config for one chain of ``k`` stops spread over
+    ``[t_min, t_max]`` with K = 1 (a single stop with a line search sits at ``t_min``, where
+    the x0-estimate is sharpest), ``search`` line-search lengths, and the step scale and
+    controller step rescaled to the paper's drift budget (as the ``quick`` preset does)."""
     from dbtool.codesign.config import TABLE5, drift_budget, n_steps, preset
 
-    plan = diffusebot_plan(task, budget)
-    emb, cod = preset(plan["preset"], task)
-    s = plan["samples_per_epoch"]
-    ratio = max(1, emb.buffer_size // emb.samples_per_epoch)
-    emb = replace(emb, samples_per_epoch=s, min_buffer=min(emb.min_buffer, s),
-                  buffer_size=s * ratio, top_k=min(emb.top_k, s),
-                  batch_size=min(emb.batch_size, s), epochs=plan["epochs"],
-                  sample_steps=budget.sample_steps)
+    _, cod = preset("quick", task)
+    span = cod.t_max - cod.t_min
+    dt = span + 1 if k == 1 else -(-span // (k - 1))
+    if k == 1 and search:  # at t_min: measured against t_max, docs/results.md
+        cod = replace(cod, t_max=cod.t_min)
+    cod = replace(cod, K=1, dt=dt, samples=1, search=tuple(cod.search[:search]), refine=0)
+    paper = TABLE5[task]
+    return replace(cod, step_scale=drift_budget(paper) / drift_budget(cod),
+                   gamma=paper.gamma * n_steps(paper) / n_steps(cod))
+
+
+def paper_configs(task: str, budget: Budget):
+    """The embedding and co-design configs of :func:`paper_plan`: the preset's settings
+    with the plan's sizes (:func:`chain_config` for a chain sized to the budget)."""
+    from dbtool.codesign.config import preset
+
+    plan = paper_plan(task, budget)
+    emb = _sized_epochs(task, budget, plan["epochs"], plan["samples_per_epoch"],
+                        plan["preset"])
+    _, cod = preset(plan["preset"], task)
     if plan["preset"] == "quick":
-        k = plan["langevin_steps"]
-        span = cod.t_max - cod.t_min
-        dt = span + 1 if k == 1 else -(-span // (k - 1))
-        if k == 1 and plan["line_search"]:  # at t_min: measured against t_max, docs/results.md
-            cod = replace(cod, t_max=cod.t_min)
-        cod = replace(cod, K=1, dt=dt, samples=plan["codesign_samples"],
-                      search=tuple(cod.search[:plan["line_search"]]))
-        paper = TABLE5[task]
-        cod = replace(cod, step_scale=drift_budget(paper) / drift_budget(cod),
-                      gamma=paper.gamma * n_steps(paper) / n_steps(cod))
+        cod = chain_config(task, plan["langevin_steps"], plan["line_search"])
+        cod = replace(cod, samples=plan["codesign_samples"])
     return emb, cod, plan
 
 
+SEARCH = 3  # line-search lengths of a refinement step (RefineConfig.search)
+
+
+def diffusebot_plan(task: str, budget: Budget) -> dict:
+    """How DiffuseBot spends ``budget.units - 1`` units: about half on refining the elite
+    (steps of a gradient episode and ``SEARCH`` forward episodes, fewer lengths when half
+    the budget cannot hold one such step), the rest on embedding epochs of ``S`` designs,
+    about three times as many designs per epoch as epochs (Table 4's 20 x 60), as the
+    published plan (:func:`paper_plan`) spends them at the same budget."""
+    free = budget.units - 1
+    search = SEARCH if free // 2 - 1 >= GRAD_COST + SEARCH else \
+        int(max(1, min(SEARCH, free - 2 - GRAD_COST)))
+    unit = GRAD_COST + search
+    steps = max(1, int((free // 2 - 1) // unit))
+    emb_units = int(free - unit * steps)
+    if emb_units < 2:
+        raise InputError(f"a budget of {budget.units} units is too small for DiffuseBot: it "
+                         f"needs {int(unit) + 3} (two embedding epochs, one refinement step, "
+                         "the final evaluation)")
+    epochs = int(np.clip(round(np.sqrt(emb_units / 3)), 2, 20))
+    per_epoch = max(1, emb_units // epochs)
+    return {"epochs": epochs, "samples_per_epoch": per_epoch, "refine_steps": steps,
+            "line_search": search, "planned_units": epochs * per_epoch + unit * steps + 1}
+
+
+def diffusebot_configs(task: str, budget: Budget):
+    """The embedding and refinement configs of :func:`diffusebot_plan`; the controller step
+    is Table 5's gamma rescaled to the paper's drift budget (``gamma * 45 / steps`` on the
+    active tasks, as the ``quick`` preset rescales it)."""
+    from dbtool.codesign.config import TABLE5, n_steps
+    from dbtool.codesign.refine import RefineConfig
+
+    plan = diffusebot_plan(task, budget)
+    emb = _sized_epochs(task, budget, plan["epochs"], plan["samples_per_epoch"])
+    paper = TABLE5[task]
+    search = RefineConfig().search
+    ref = RefineConfig(steps=plan["refine_steps"],
+                       search=search[-plan["line_search"]:] if plan["line_search"] < 3
+                       else search,
+                       gamma=paper.gamma * n_steps(paper) / plan["refine_steps"])
+    return emb, ref, plan
+
+
 def _diffusebot(task: Task, budget: Budget, seed: int, log) -> Outcome:
+    from dbtool.codesign.refine import refine
+
+    emb, ref, plan = diffusebot_configs(task.name, budget)
+    opt = _epochs(task, budget, seed, log, emb)
+    if not opt.buffer.elite:
+        raise RunError("no design of the embedding epochs could be robotized and simulated")
+    e = opt.buffer.elite[0]
+    best = refine(task, e.cloud, e.metric, ref, budget.n_steps,
+                  on_step=lambda r: log(phase="refine", **r))
+    source = f"embedding epoch {e.epoch}" if best["step"] < 0 else \
+        f"refinement step {best['step']} of the elite of epoch {e.epoch}"
+    return _to_outcome(task, best["cloud"], best["controller"], budget.n_steps,
+                       {**plan, "source": source, "start": e.metric})
+
+
+def _embedding_only(task: Task, budget: Budget, seed: int, log) -> Outcome:
+    """All units on embedding epochs (Table 4's shape, e epochs of about 3e designs); the
+    best design of the buffer."""
+    free = budget.units - 1
+    epochs = int(np.clip(round(np.sqrt(free / 3)), 2, 20))
+    emb = _sized_epochs(task.name, budget, epochs, max(1, free // epochs))
+    opt = _epochs(task, budget, seed, log, emb)
+    if not opt.buffer.elite:
+        raise RunError("no design of the embedding epochs could be robotized and simulated")
+    e = opt.buffer.elite[0]
+    return _to_outcome(task, e.cloud, None, budget.n_steps,
+                       {"epochs": epochs, "samples_per_epoch": emb.samples_per_epoch,
+                        "source": f"embedding epoch {e.epoch}"})
+
+
+def _codesign_only(task: Task, budget: Budget, seed: int, log) -> Outcome:
+    """All units on one co-design chain (as many stops as fit, each a gradient episode and
+    a line search) from DiffuseBot's starting embedding, no epochs."""
     from dbtool.codesign.design_run import codesign_design, guidance_terms, source
+
+    free = budget.units - 1
+    search = 3 if free >= 2 * (GRAD_COST + 3) else int(max(0, min(3, free - 1 - GRAD_COST)))
+    k = max(1, int((free - 1) // (GRAD_COST + search)))
+    cod = chain_config(task.name, k, search)
+    emb = _sized_epochs(task.name, budget, 1, 1)
+    opt = _epochs(task, budget, seed, lambda **_: None, replace(emb, epochs=0))
+    conds = guidance_terms(load_prior(), opt.current(), emb.guidance)
+    s = codesign_design(load_prior(), task, conds, cod, seed * 1_000_003 + 10_007,
+                        emb.sample_steps, budget.n_steps,
+                        on_step=lambda r: log(phase="codesign", sample=0, **r))
+    log(phase="codesign", sample=0, final=True, metric=s["metric"])
+    if not np.isfinite(s["metric"]):
+        raise RunError("the co-designed sample could not be robotized and simulated")
+    return _to_outcome(task, s["cloud"], s["controller"], budget.n_steps,
+                       {"langevin_steps": k, "line_search": search, "source": source(s)})
+
+
+def _epochs(task: Task, budget: Budget, seed: int, log, emb):
+    """The embedding epochs of ``emb``: the optimiser after them."""
     from dbtool.codesign.embedding import EmbeddingOptimiser
 
     prior = load_prior()
-    emb, cod, plan = diffusebot_configs(task.name, budget)
     opt = EmbeddingOptimiser(prior, task, emb, prior.null(), seed=seed,
                              n_steps=budget.n_steps)
     for _ in range(emb.epochs):
         row = opt.step()
         log(phase="embedding", epoch=row["epoch"], mean=row["mean"], max=row["max"],
             failed=row["failed"], loss=row["loss"])
+    return opt
+
+
+def _diffusebot_paper(task: Task, budget: Budget, seed: int, log) -> Outcome:
+    from dbtool.codesign.design_run import codesign_design, guidance_terms, source
+
+    prior = load_prior()
+    emb, cod, plan = paper_configs(task.name, budget)
+    opt = _epochs(task, budget, seed, log, emb)
     conds = guidance_terms(prior, opt.current(), emb.guidance)
     cands = []
     for k in range(cod.samples):

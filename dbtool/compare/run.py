@@ -26,7 +26,7 @@ from dbtool.compare.anytime import check_cell
 from dbtool.compare.budget import get_budget
 from dbtool.compare.cells import CellSpec, copy_cell, read_cell, read_compare_json
 from dbtool.compare.executors import check_executor, execute
-from dbtool.compare.methods import METHODS, seeded
+from dbtool.compare.methods import KNOWN, METHODS, seeded
 from dbtool.errors import InputError
 from dbtool.runs import RunFolder
 from dbtool.sim.tasks import TASKS
@@ -57,8 +57,8 @@ class CompareConfig:
         if self.tasks == ["all"]:
             self.tasks = list(TASKS)
         for m in self.methods:
-            if m not in METHODS:
-                raise CompareError(f"unknown method {m!r}; choose from {', '.join(METHODS)} "
+            if m not in KNOWN:
+                raise CompareError(f"unknown method {m!r}; choose from {', '.join(KNOWN)} "
                                    "or all")
         for t in self.tasks:
             if t not in TASKS:
@@ -77,7 +77,7 @@ class CompareConfig:
 
 
 def _order(cells: list[tuple[str, str, int]]) -> list[list]:
-    key = {m: i for i, m in enumerate(METHODS)}
+    key = {m: i for i, m in enumerate(KNOWN)}
     tkey = {t: i for i, t in enumerate(TASKS)}
     uniq = {tuple(c) for c in cells}
     return [list(c) for c in sorted(uniq, key=lambda c: (tkey[c[1]], key[c[0]], c[2]))]
@@ -90,7 +90,7 @@ def stored_config(out: str | Path) -> dict:
         meta = read_compare_json(Path(out) / "compare.json", resume=True)
         return {"budget": meta["budget"], "threads": meta["threads"],
                 "tasks": sorted({c[1] for c in meta["cells"]}, key=list(TASKS).index),
-                "methods": sorted({c[0] for c in meta["cells"]}, key=list(METHODS).index),
+                "methods": sorted({c[0] for c in meta["cells"]}, key=list(KNOWN).index),
                 "seeds": sorted({c[2] for c in meta["cells"]})}
     except (OSError, ValueError, KeyError, TypeError):  # InputError is a ValueError
         return {}

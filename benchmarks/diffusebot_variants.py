@@ -1,0 +1,162 @@
+"""Variants of DiffuseBot's co-design phase at the ``standard`` budget, paired by seed with the
+committed prior-sample and DiffuseBot cells (docs/results.md, "Where the units go").
+
+DiffuseBot's embedding epochs are the same in every variant (the same seed draws the same
+designs), so each (task, seed)'s epochs run once and are cached under ``--cache``: the buffer's
+best designs, the embedding and the units spent. A variant spends the rest of the cell's budget
+(``units - 1 - epochs``, the final evaluation left out as in a cell) on its co-design phase:
+
+* ``refine``: the elite refined at ``t = 0`` (:mod:`dbtool.codesign.refine`), as many steps as
+  fit.
+
+Each variant's result per (task, seed) is cached as JSON too, so an interrupted run continues.
+Prints a table per variant: its metric against the committed prior-sample cell's (best of 99
+samples) and DiffuseBot cell's, with the paired mean difference and its 95% interval
+(t distribution), and writes ``benchmarks/results/diffusebot-variants.json``.
+
+Usage::
+
+    python benchmarks/diffusebot_variants.py --tasks crawling gripping --seeds 0 1 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).parent))
+from _results import write_result  # noqa: E402
+
+from dbtool.atomic import atomic_write_text  # noqa: E402
+from dbtool.compare.budget import GRAD_COST, get_budget, used  # noqa: E402
+from dbtool.sim import simulator  # noqa: E402
+from dbtool.sim.tasks import TASKS, get_task  # noqa: E402
+
+HERE = Path(__file__).parent
+CELLS = HERE.parent / "docs" / "results" / "compare-standard" / "cells"
+VARIANTS = ("refine",)
+
+
+def _units(before: dict) -> float:
+    return used(simulator.EPISODES["forward"] - before["forward"],
+                simulator.EPISODES["backward"] - before["backward"])
+
+
+def epochs(task: str, seed: int, cache: Path) -> dict:
+    """The embedding epochs of DiffuseBot's standard cell (cached): the buffer's best four
+    designs, their metrics, the embedding and the units spent."""
+    path = cache / f"epochs-{task}-s{seed}.pt"
+    if path.exists():
+        return torch.load(path, weights_only=False)
+    from dbtool.codesign.embedding import EmbeddingOptimiser
+    from dbtool.compare.methods import diffusebot_configs, load_prior
+
+    prior = load_prior()
+    emb, cod, plan = diffusebot_configs(task, get_budget("standard"))
+    opt = EmbeddingOptimiser(prior, get_task(task), emb, prior.null(), seed=seed,
+                             n_steps=100)
+    before, t0 = dict(simulator.EPISODES), time.perf_counter()
+    rows = [opt.step() for _ in range(emb.epochs)]
+    elite = opt.buffer.elite[:4]
+    out = {"clouds": np.array([e.cloud for e in elite]),
+           "metrics": np.array([e.metric for e in elite]),
+           "epochs_of": [e.epoch for e in elite], "c": opt.current(),
+           "max": [r["max"] for r in rows], "units": _units(before),
+           "seconds": time.perf_counter() - t0, "gamma": cod.gamma, "plan": plan}
+    tmp = path.with_suffix(".tmp")
+    torch.save(out, tmp)
+    tmp.rename(path)
+    return out
+
+
+def run_variant(variant: str, task: str, seed: int, cache: Path) -> dict:
+    path = cache / f"{variant}-{task}-s{seed}.json"
+    if path.exists():
+        return json.loads(path.read_text())
+    from dbtool.codesign.refine import RefineConfig, refine
+
+    ep = epochs(task, seed, cache)
+    free = get_budget("standard").units - 1 - ep["units"]
+    before, t0 = dict(simulator.EPISODES), time.perf_counter()
+    rows: list[dict] = []
+    if variant == "refine":
+        cfg = RefineConfig(steps=int(free // (GRAD_COST + 3)), gamma=ep["gamma"])
+        best = refine(get_task(task), ep["clouds"][0], float(ep["metrics"][0]), cfg, 100,
+                      on_step=rows.append)
+    else:
+        raise SystemExit(f"unknown variant {variant}")
+    out = {"variant": variant, "task": task, "seed": seed, "metric": best["metric"],
+           "start": float(ep["metrics"][0]), "best_step": best["step"],
+           "units": ep["units"] + _units(before), "seconds": time.perf_counter() - t0,
+           "rows": rows}
+    atomic_write_text(path, json.dumps(out, default=float))
+    return out
+
+
+def paired_stats(d: np.ndarray) -> dict:
+    """Mean of the paired differences ``d`` and its 95% interval (Student's t)."""
+    from scipy import stats
+
+    n, mean = len(d), float(np.mean(d)) if len(d) else float("nan")
+    if n < 2:
+        return {"n": n, "mean": mean, "low": float("nan"), "high": float("nan")}
+    half = float(stats.t.ppf(0.975, n - 1) * np.std(d, ddof=1) / np.sqrt(n))
+    return {"n": n, "mean": mean, "low": mean - half, "high": mean + half}
+
+
+def committed(method: str, task: str, seed: int) -> float | None:
+    p = CELLS / f"{method}-{task}-s{seed}" / "cell.json"
+    return json.loads(p.read_text())["metric"] if p.exists() else None
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--tasks", nargs="+", default=list(TASKS))
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    ap.add_argument("--variants", nargs="+", default=list(VARIANTS))
+    ap.add_argument("--cache", type=Path,
+                    default=Path.home() / ".cache" / "dbtool" / "diffusebot-variants")
+    ap.add_argument("--out", type=Path)
+    args = ap.parse_args()
+    from dbtool.compare.cells import worker_init
+
+    worker_init(1)
+    args.cache.mkdir(parents=True, exist_ok=True)
+    table: dict = {}
+    for variant in args.variants:
+        for task in args.tasks:
+            for seed in args.seeds:
+                r = run_variant(variant, task, seed, args.cache)
+                r.update(prior=committed("prior", task, seed),
+                         diffusebot=committed("diffusebot", task, seed))
+                table.setdefault(variant, {}).setdefault(task, []).append(r)
+                print(f"{variant:8s} {task:9s} s{seed} start {r['start']:.5g} -> "
+                      f"{r['metric']:.5g} (step {r['best_step']}, {r['units']:.0f} units, "
+                      f"{r['seconds']:.0f} s)  prior {r['prior']:.5g}  diffusebot "
+                      f"{r['diffusebot']:.5g}", flush=True)
+    summary: dict = {}
+    print(f"\n{'variant':8s} {'task':9s} {'- prior samples [95%]':>34s} "
+          f"{'- DiffuseBot [95%]':>34s}")
+    for variant, tasks in table.items():
+        for task, rows in tasks.items():
+            s = {}
+            for ref in ("prior", "diffusebot"):
+                d = [r["metric"] - r[ref] for r in rows if r[ref] is not None]
+                s[ref] = paired_stats(np.array(d))
+            summary.setdefault(variant, {})[task] = s
+            print(f"{variant:8s} {task:9s} " + " ".join(
+                f"{s[ref]['mean']:+.4g} [{s[ref]['low']:+.4g}, {s[ref]['high']:+.4g}]".rjust(34)
+                for ref in ("prior", "diffusebot")))
+    write_result({"table": table, "paired": summary}, args.out,
+                 HERE / "results" / "diffusebot-variants.json", False,
+                 {"tasks": args.tasks, "seeds": args.seeds, "variants": args.variants})
+
+
+if __name__ == "__main__":
+    main()
