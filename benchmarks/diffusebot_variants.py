@@ -115,6 +115,37 @@ def committed(method: str, task: str, seed: int) -> float | None:
     return json.loads(p.read_text())["metric"] if p.exists() else None
 
 
+def markdown(table: dict, summary: dict) -> str:
+    """Per variant: one row per task with the seeds' metrics against the committed cells and
+    the paired differences with their 95% intervals."""
+    def num(x):
+        return "—" if x is None or not np.isfinite(x) else f"{x:.4g}"
+
+    def diff(s):
+        if not np.isfinite(s["low"]):
+            return f"{s['mean']:+.4g}" if np.isfinite(s["mean"]) else "—"
+        return f"{s['mean']:+.4g} [{s['low']:+.4g}, {s['high']:+.4g}]"
+
+    out = []
+    for variant, tasks in table.items():
+        out += [f"**{variant}**", "",
+                "| task | seeds | start (elite) | variant | prior samples | DiffuseBot (paper) "
+                "| variant − prior samples [95%] | variant − DiffuseBot (paper) [95%] |",
+                "| --- | --- | ---: | ---: | ---: | ---: | --- | --- |"]
+        for task, rows in tasks.items():
+            s = summary[variant][task]
+            def mean(k, rows=rows):
+                vals = [r[k] for r in rows if r[k] is not None]
+                return float(np.mean(vals)) if vals else None
+
+            out.append(f"| {task} | {', '.join(str(r['seed']) for r in rows)} | "
+                       f"{num(mean('start'))} | {num(mean('metric'))} | {num(mean('prior'))} | "
+                       f"{num(mean('diffusebot'))} | {diff(s['prior'])} | "
+                       f"{diff(s['diffusebot'])} |")
+        out.append("")
+    return "\n".join(out)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--tasks", nargs="+", default=list(TASKS))
@@ -123,6 +154,7 @@ def main() -> None:
     ap.add_argument("--cache", type=Path,
                     default=Path.home() / ".cache" / "dbtool" / "diffusebot-variants")
     ap.add_argument("--out", type=Path)
+    ap.add_argument("--md", type=Path, help="also write the tables as markdown here")
     args = ap.parse_args()
     from dbtool.compare.cells import worker_init
 
@@ -153,6 +185,9 @@ def main() -> None:
             print(f"{variant:8s} {task:9s} " + " ".join(
                 f"{s[ref]['mean']:+.4g} [{s[ref]['low']:+.4g}, {s[ref]['high']:+.4g}]".rjust(34)
                 for ref in ("prior", "diffusebot")))
+    if args.md:
+        atomic_write_text(args.md, markdown(table, summary))
+        print(f"wrote {args.md}")
     write_result({"table": table, "paired": summary}, args.out,
                  HERE / "results" / "diffusebot-variants.json", False,
                  {"tasks": args.tasks, "seeds": args.seeds, "variants": args.variants})

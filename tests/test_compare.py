@@ -25,7 +25,15 @@ from cli_inprocess import run_cli
 
 from dbtool.cli.compare import expand_list_options
 from dbtool.compare.budget import BUDGETS, GRAD_COST, get_budget, gradient_iterations, used
-from dbtool.compare.methods import GRADIENT, METHODS, TITLES, diffusebot_configs, diffusebot_plan
+from dbtool.compare.methods import (
+    GRADIENT,
+    METHODS,
+    TITLES,
+    diffusebot_configs,
+    diffusebot_plan,
+    paper_configs,
+    paper_plan,
+)
 from dbtool.design import Design
 from dbtool.sim.tasks import TASKS, get_task
 
@@ -94,7 +102,8 @@ def test_serial_smoke_comparison(serial_run):
             assert (fwd, grad) == (2, gradient_iterations(units)) == (2, 1)
         elif r["method"] == "prior":  # units - 1 samples and the final evaluation
             assert (fwd, grad) == (units, 0)
-        else:  # two epochs of one design, one Langevin step, its score, the final evaluation
+        else:  # two epochs of one design, one refinement step (a gradient episode and a
+            # line search of one length), the final evaluation
             assert (fwd, grad) == (5, 1)
             assert float(r["budget_used"]) == diffusebot_plan(r["task"],
                                                               get_budget("smoke"))["planned_units"]
@@ -347,6 +356,9 @@ def test_space_separated_lists_reach_every_value(tmp_path):
 
 
 # ------------------------------------------------------------------------- budget arithmetic
+REFINE_PLANS = {  # (epochs, samples per epoch, refinement steps, line search, planned units)
+    "smoke": (2, 1, 1, 1, 8), "quick": (2, 6, 1, 3, 20), "standard": (4, 14, 6, 3, 99),
+    "paper": (20, 62, 178, 3, 2487)}
 PLANS = {  # (epochs, samples per epoch, co-design samples, Langevin steps, planned units)
     "smoke": {t: (2, 1, 1, 1, 8) for t in TASKS},
     "quick": {t: (2, 5, 1, 1, 19) for t in TASKS},
@@ -367,13 +379,13 @@ def test_every_method_fits_the_budget(name):
     assert n == {"smoke": 1, "quick": 4, "standard": 24, "paper": 624}[name]
     assert used(n + 1, n) <= budget.units < used(n + 2, n + 1)  # all that fits, and no more
     for task in TASKS:
-        plan = diffusebot_plan(task, budget)
+        plan = paper_plan(task, budget)
         sizes = (plan["epochs"], plan["samples_per_epoch"], plan["codesign_samples"],
                  plan["langevin_steps"], plan["planned_units"])
         assert sizes == PLANS[name][task]
         assert plan["preset"] == ("paper" if name == "paper" else "quick")
         assert plan["planned_units"] <= budget.units
-        emb, cod, _ = diffusebot_configs(task, budget)
+        emb, cod, _ = paper_configs(task, budget)
         search = len(cod.search)  # forward episodes of each step's line search
         assert search == {"smoke": 0, "quick": 3, "standard": 3, "paper": 3}[name]
         assert plan["planned_units"] == (
@@ -381,12 +393,25 @@ def test_every_method_fits_the_budget(name):
             + plan["codesign_samples"] * used(plan["langevin_steps"] * (1 + search) + 1,
                                               plan["langevin_steps"]))
         assert (emb.epochs, emb.samples_per_epoch, cod.samples, n_steps(cod)) == sizes[:4]
-        assert emb.sample_steps == budget.sample_steps
+        assert emb.sample_steps == budget.sample_steps and cod.refine == 0
         if name in ("smoke", "quick"):  # one stop: at t_min with the line search, else t_max
             assert stops(cod) == [0 if search else TABLE5[task].t_max]
         elif name == "standard":  # six stops spread over Table 5's [t_min, t_max]
             st = stops(cod)
             assert len(st) == 6 and st[0] == TABLE5[task].t_max and st[-1] == TABLE5[task].t_min
+        # DiffuseBot: the same epochs as the published plan where it is sized to the budget,
+        # the rest on refinement steps of the elite (a gradient episode and a line search)
+        new = diffusebot_plan(task, budget)
+        emb2, ref, _ = diffusebot_configs(task, budget)
+        assert (new["epochs"], new["samples_per_epoch"], new["refine_steps"],
+                new["line_search"], new["planned_units"]) == REFINE_PLANS[name]
+        assert (emb2.epochs, emb2.samples_per_epoch, ref.steps, len(ref.search)) == \
+            REFINE_PLANS[name][:4]
+        assert new["planned_units"] == (new["epochs"] * new["samples_per_epoch"] + 1 + used(
+            ref.steps * (1 + len(ref.search)), ref.steps)) <= budget.units
+        assert ref.gamma * ref.steps == pytest.approx(TABLE5[task].gamma * n_steps(TABLE5[task]))
+        if name == "standard":
+            assert (emb2.epochs, emb2.samples_per_epoch) == (emb.epochs, emb.samples_per_epoch)
 
 
 def test_gradient_iterations_of_tiny_budgets():

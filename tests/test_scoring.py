@@ -16,7 +16,8 @@ from dbtool.errors import InputError
 from dbtool.prior.sampling.pipeline import Prior
 from dbtool.sim.tasks import get_task
 
-CELLS = Path(__file__).resolve().parents[1] / "docs" / "results" / "compare-standard" / "cells"
+CELLS = (Path(__file__).resolve().parents[1] / "benchmarks" / "state" / "compare-standard"
+         / "cells")
 STEPS = 8
 
 

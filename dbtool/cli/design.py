@@ -29,8 +29,12 @@ def design_command(
     seed: int = typer.Option(0, min=0, max=MAX_SEED, help="seed of the whole run"),
     epochs: int = typer.Option(None, min=0, max=10_000,
                                help="embedding epochs (default: the preset's)"),
-    samples: int = typer.Option(None, min=1, max=10_000,
-                                help="co-designed samples (default: preset's)"),
+    samples: int = typer.Option(None, min=0, max=10_000,
+                                help="fresh co-designed samples (default: the preset's, 0 "
+                                     "quick, 4 paper)"),
+    refine: int = typer.Option(None, min=0, max=100_000,
+                               help="refinement steps of the best design, co-design from the "
+                                    "elite (default: the preset's, 10 quick, 0 paper)"),
     kappa: float = typer.Option(None, min=0, help="physics weight (default: Table 5's)"),
     steps: int = typer.Option(100, min=1, max=MAX_STEPS, help="control steps per episode"),
     run_dir: Path = typer.Option(None, "--run-dir",
@@ -54,8 +58,9 @@ def design_command(
                                 "each worker (default: DBTOOL_THREADS or the CPU count; 1 "
                                 "with --executor local or ray)"),
 ) -> None:
-    """Breed a robot for TASK (DiffuseBot: embedding optimisation, then diffusion as
-    co-design) and save design.npz, metrics and figures in a resumable run directory."""
+    """Breed a robot for TASK (DiffuseBot: embedding optimisation, then co-design from the
+    elite; --preset paper: the published fresh co-designed samples) and save design.npz,
+    metrics and figures in a resumable run directory."""
     from dbtool.baselines.run import check_method
     from dbtool.cli.common import particle_design
     from dbtool.codesign.design_run import Settings
@@ -72,7 +77,8 @@ def design_command(
         scorer = Scorer(executor, workers, threads or 1, arch, address)
         run = open_design_run(Settings(get_task(task).name, preset, seed, epochs, start, prompt,
                                        prompt_guidance, samples, kappa, None, steps,
-                                       prompt_t_min=prompt_t_min, prior=prior), run_dir, resume,
+                                       prompt_t_min=prompt_t_min, prior=prior, refine=refine),
+                              run_dir, resume,
                               arch, threads, scorer)
         try:
             for text in filter(None, (run.settings.prompt, run.settings.start)):

@@ -174,7 +174,6 @@ class Settings:
     prompt: str | None = None  # text feedback (docs/method.md §6)
     prompt_guidance: float = 3.0
     samples: int | None = None  # fresh co-designed samples; None: the preset's
-    refine: int | None = None  # refinement steps of the best design; None: the preset's
     kappa: float | None = None  # override Table 5's kappa (0: the ablation)
     gamma: float | None = None  # override Table 5's gamma
     n_steps: int = N_STEPS
@@ -182,6 +181,7 @@ class Settings:
     samples_per_epoch: int | None = None  # designs per embedding epoch; None: the preset's
     sample_steps: int | None = None  # denoising steps per design; None: the preset's
     prior: int | None = None  # shipped prior version; None: the default (recorded at start)
+    refine: int | None = None  # refinement steps of the best design; None: the preset's
 
     def check(self) -> None:
         """Refuse settings no run can use (:class:`~dbtool.errors.InputError`, one line),

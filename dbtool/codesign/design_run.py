@@ -314,7 +314,7 @@ class DesignRun:
                 self.checkpoint()
                 bar.set_postfix(mean=f"{row['mean']:.4f}", max=f"{row['max']:.4f}")
                 bar.update(1)
-        n = self.settings.samples or cod.samples
+        n = cod.samples if self.settings.samples is None else self.settings.samples
         conds = self.conds()
         with tqdm(total=n, initial=len(self.state.samples), desc="co-design samples",
                   unit="design", disable=not show_progress or None, leave=False) as bar:
