@@ -113,6 +113,8 @@ def run_files(folder: Path) -> list[dict]:
         elif r.get("phase") == "codesign" and "metric" in r and not r.get("final"):
             integer(f"{where}: sample", r.get("sample"))
             real(f"{where}: metric", r["metric"])
+        elif r.get("phase") == "refine" and "metric" in r:
+            real(f"{where}: metric", r["metric"])
     return rows
 
 

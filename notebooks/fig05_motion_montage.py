@@ -19,18 +19,19 @@
 # # Figures 5 and 9 — the final robot of each task in motion
 #
 # `dbtool design TASK` (DiffuseBot, docs/method.md §4-§5) breeds a robot per task: embedding
-# optimisation (Algorithm 1) and then diffusion as co-design (Langevin steps whose drift adds the
-# simulator's gradient, with the controller co-optimised on active tasks). This notebook runs
+# optimisation (Algorithm 1) and then co-design from the elite (the best design of the epochs
+# refined by the Langevin steps of the last co-design stop, whose drift is the simulator's
+# gradient, with the controller co-optimised on active tasks). This notebook runs
 # the library call behind the CLI (`DesignRun`) for each of the six tasks on the `quick` preset
 # and shows the final robot in motion.
 #
 # Quick mode (`DBTOOL_QUICK=1`, used in CI) runs crawling and gripping only, with one
-# embedding epoch of 4 designs, 16 sampler steps, one co-designed sample and 10-step episodes
+# embedding epoch of 4 designs, 16 sampler steps, 5 refinement steps and 10-step episodes
 # per task, and skips the upsampler (the
 # final design keeps its 1,024-point cloud; the figures show the robot's particles), so the
 # robots are barely optimised: the notebook then documents the pipeline, not the paper's
 # performance. Unset, it runs the full quick preset (4 epochs of 12 samples, 32 sampler steps,
-# 2 co-designed samples, 100-step episodes; about 10 minutes per task here).
+# 10 refinement steps, 100-step episodes; about 10 minutes per task here).
 
 # %%
 import os
@@ -44,7 +45,7 @@ from dbtool.prior.sampling.pipeline import Prior
 from dbtool.sim.tasks import TASKS
 
 QUICK = os.environ.get("DBTOOL_QUICK", "0") == "1"
-SIZES = dict(epochs=1, samples_per_epoch=4, sample_steps=16, samples=1,
+SIZES = dict(epochs=1, samples_per_epoch=4, sample_steps=16, refine=5,
              n_steps=10) if QUICK else {}
 UPSAMPLE = not QUICK  # the final design's 4,096-point surface
 RUN = ("crawling", "gripping") if QUICK else tuple(TASKS)
@@ -110,8 +111,8 @@ for _name, (_, path, _) in results.items():
 # %% [markdown]
 # ## Performance along the run
 #
-# Left: mean and best performance of each epoch's samples. Right: the performance of x_t at
-# every co-design Langevin step (robotized with the noise level of t).
+# Left: mean and best performance of each epoch's samples. Right: the performance of the
+# design before each refinement step of co-design from the elite.
 
 # %%
 for _name, (_, path, _) in results.items():

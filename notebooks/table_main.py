@@ -84,8 +84,9 @@ print(f"  gradient baselines: {gradient_iterations(budget.units)} gradient episo
       "final evaluation")
 print(f"  prior samples: {max(1, budget.units - 1)} samples scored, then the final evaluation")
 print(f"  DiffuseBot on {TASKS[0]}: {plan['epochs']} embedding epoch(s) of "
-      f"{plan['samples_per_epoch']} design(s), {plan['codesign_samples']} co-designed sample(s) "
-      f"of {plan['langevin_steps']} Langevin step(s); planned {plan['planned_units']:g} units")
+      f"{plan['samples_per_epoch']} design(s), then {plan['refine_steps']} refinement step(s) "
+      f"of the elite, each a gradient episode and {plan['line_search']} line-search "
+      f"episode(s); planned {plan['planned_units']:g} units")
 
 # %% [markdown]
 # ## The committed tables (`quick` and `standard` budgets)

@@ -37,7 +37,7 @@ QUICK_SETTINGS = {
         ("settings('crawling').samples_per_epoch", 4, 12),
         ("settings('crawling').sample_steps", 16, 32)],
     "fig05_motion_montage": [
-        ("SIZES", {"epochs": 1, "samples_per_epoch": 4, "sample_steps": 16, "samples": 1,
+        ("SIZES", {"epochs": 1, "samples_per_epoch": 4, "sample_steps": 16, "refine": 5,
                    "n_steps": 10}, {}), ("UPSAMPLE", False, True),
         ("RUN", ("crawling", "gripping"), tuple(TASKS))],
     "fig08_robotizing": [("len(FAMILIES)", 2, 3), ("STEPS", 10, 100), ("ITERS", 2, 5)],

@@ -144,6 +144,7 @@ def _step(st: RefineState, task: Task, cfg: RefineConfig, n_steps: int, on_step)
     if phi is not None and cfg.gamma > 0 and ph.grad_phi is not None:
         st.phi = np.clip(phi + cfg.gamma * ph.grad_phi, -1.0, 1.0)
         row["phi_grad"] = float(np.abs(ph.grad_phi).max())
+    row["best"] = st.best["metric"]  # the best design simulated so far (the anytime curve)
     if on_step is not None:
         on_step(row)
     return True

@@ -44,6 +44,10 @@ def performance_panels(rows: list[dict]) -> list:
     for s in sorted({r["sample"] for r in cd}):
         pts = [r["metric"] for r in cd if r["sample"] == s]
         chain.curves.append(Curve(f"sample {s}", list(range(len(pts))), pts))
+    ref = [r["metric"] for r in rows if r.get("phase") == "refine" and "metric" in r
+           and not r.get("final")]
+    if ref:  # co-design from the elite: the design's metric before each refinement step
+        chain.curves.append(Curve("from the elite", list(range(len(ref))), ref))
     return [emb, chain]
 
 

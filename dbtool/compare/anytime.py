@@ -7,8 +7,9 @@ before rows carried units get them back from the budget arithmetic (:func:`row_u
 gradient iteration costs ``GRAD_COST``, a scored sample or embedding design one unit, a Langevin
 step a gradient episode and its line search; such curves are marked ``reconstructed``.
 
-What a row found: ``max`` for an embedding epoch (its best design), ``metric`` otherwise (a
-gradient iterate, a prior sample, a co-design step's design, the final evaluation).
+What a row found: ``max`` for an embedding epoch (its best design), ``best`` for a refinement
+step of the elite, ``metric`` otherwise (a gradient iterate, a prior sample, a co-design step's
+design, the final evaluation).
 """
 
 from __future__ import annotations
@@ -29,7 +30,8 @@ from dbtool.compare.budget import GRAD_COST  # noqa: E402
 from dbtool.compare.labels import grid_shape, method_name, ordered, task_title  # noqa: E402
 from dbtool.viz.clouds import save_figure  # noqa: E402
 
-METRIC_OF = {"embedding": "max"}  # the field a phase's row reports its best design in
+# the field a phase's row reports its best design in (a refinement step: the best so far)
+METRIC_OF = {"embedding": "max", "refine": "best"}
 
 
 def row_units(rows: list[dict], record: dict) -> list[float]:
