@@ -155,6 +155,8 @@ def main() -> None:
                     default=Path.home() / ".cache" / "dbtool" / "diffusebot-variants")
     ap.add_argument("--out", type=Path)
     ap.add_argument("--md", type=Path, help="also write the tables as markdown here")
+    ap.add_argument("--cached", action="store_true",
+                    help="report the finished (task, seed) pairs only; run nothing")
     args = ap.parse_args()
     from dbtool.compare.cells import worker_init
 
@@ -164,6 +166,8 @@ def main() -> None:
     for variant in args.variants:
         for task in args.tasks:
             for seed in args.seeds:
+                if args.cached and not (args.cache / f"{variant}-{task}-s{seed}.json").exists():
+                    continue
                 r = run_variant(variant, task, seed, args.cache)
                 r.update(prior=committed("prior", task, seed),
                          diffusebot=committed("diffusebot", task, seed))
@@ -177,7 +181,7 @@ def main() -> None:
           f"{'- DiffuseBot [95%]':>34s}")
     for variant, tasks in table.items():
         for task, rows in tasks.items():
-            s = {}
+            s: dict = {}
             for ref in ("prior", "diffusebot"):
                 d = [r["metric"] - r[ref] for r in rows if r[ref] is not None]
                 s[ref] = paired_stats(np.array(d))
