@@ -359,3 +359,16 @@ def test_bandit_model_moves_the_mixture_onto_the_condition_that_performs():
     assert bandit(metrics, emb, "adam", 1.0, seed=0) == runs[0].tolist()  # seeded
     with pytest.raises(ValueError, match="conditions for a mixture"):
         bandit(metrics[:2], emb, "sgd", 1.0, seed=0)
+
+
+def test_runs_from_before_co_design_from_the_elite_resume_as_they_were():
+    """A checkpoint without ``refine`` was written when the quick preset drew two fresh
+    co-designed samples and refined nothing: it resumes that way."""
+    old = {"task": "crawling", "preset": "quick", "seed": 1, "samples": None}
+    s = Settings.saved(old)
+    assert (s.samples, s.refine, s.prompt_t_min, s.prior) == (2, 0, 0, 1)
+    assert s.configs()[1].refine == 0
+    assert Settings.saved({**old, "preset": "paper"}).samples is None  # the paper's 4
+    assert Settings.saved({**old, "samples": 3}).samples == 3
+    new = Settings.saved({**old, "refine": None, "prior": 2})  # a run of today
+    assert (new.samples, new.refine) == (None, None) and new.configs()[1].refine == 10

@@ -183,6 +183,17 @@ class Settings:
     prior: int | None = None  # shipped prior version; None: the default (recorded at start)
     refine: int | None = None  # refinement steps of the best design; None: the preset's
 
+    @classmethod
+    def saved(cls, d: dict) -> Settings:
+        """The settings a run's checkpoint recorded, as that run used them: runs from before
+        the prompt window had the prompt on every step, runs from before the prior option
+        sampled version 1, and runs from before co-design from the elite drew the quick
+        preset's two fresh samples and refined nothing."""
+        if "refine" not in d:
+            d = {**d, "refine": 0, "samples": d.get("samples") or
+                 (2 if d.get("preset", "quick") == "quick" else None)}
+        return cls(**{"prompt_t_min": 0, "prior": 1, **d})
+
     def check(self) -> None:
         """Refuse settings no run can use (:class:`~dbtool.errors.InputError`, one line),
         before anything is loaded or written."""

@@ -227,10 +227,7 @@ class DesignRun:
             ck = torch.load(ck_path, map_location="cpu", weights_only=True)
             if not isinstance(ck, dict) or ck.get("format") != FORMAT:
                 raise RunDirectoryError(f"{ck_path} is not a dbtool run checkpoint")
-            # runs from before the prompt window had the prompt on every step, and runs from
-            # before the prior option sampled version 1
-            run = cls(path, Settings(**{"prompt_t_min": 0, "prior": 1, **ck["settings"]}), prior,
-                      scorer)
+            run = cls(path, Settings.saved(ck["settings"]), prior, scorer)
             o = run.opt
             o.embedding.load_state_dict(ck["embedding"])
             o.opt.load_state_dict(ck["adam"])
