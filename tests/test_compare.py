@@ -298,7 +298,7 @@ ONE = ["--budget", "smoke", "--tasks", TASK, "--methods", "particle"]
 BAD = {
     "unknown method": (["--budget", "smoke", "--methods", "nosuch", "--out", "new"], None,
                        "unknown method 'nosuch'; choose from particle, voxel, implicit, cppn, "
-                       "prior, diffusebot or all"),
+                       "prior, diffusebot, embedding, codesign, diffusebot-paper or all"),
     "unknown task": (["--budget", "smoke", "--tasks", "walking", "--out", "new"], None,
                      "unknown task 'walking'"),
     "unknown budget": (["--budget", "huge", "--out", "new"], None,
