@@ -66,9 +66,10 @@ def test_bad_input_is_one_line_and_nonzero(tmp_path):
 
 
 def test_design_then_export(tmp_path):
-    # no embedding epoch (the library tests run them): the sampler, co-design and the files
-    out = _run("design", "gripping", "--epochs", "0", "--samples", "1", "--steps", "4",
-               cwd=tmp_path)
+    # no embedding epoch (the library tests run them): the sampler, a fresh co-designed sample
+    # refined by two steps, and the files
+    out = _run("design", "gripping", "--epochs", "0", "--samples", "1", "--refine", "2",
+               "--steps", "4", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     assert "final metric" in out.stdout
     found = list((tmp_path / "runs").glob("design-gripping-*/design.npz"))
