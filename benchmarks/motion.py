@@ -48,6 +48,7 @@ def main() -> None:
     ap.add_argument("folder", type=Path, help="a comparison folder (with cells/)")
     ap.add_argument("--methods", nargs="+", default=["prior", "diffusebot"])
     ap.add_argument("--out", type=Path)
+    ap.add_argument("--md", type=Path, help="also write the counts as a markdown table here")
     args = ap.parse_args()
     from dbtool.compare.cells import worker_init
 
@@ -71,6 +72,21 @@ def main() -> None:
     for task, by in counts.items():
         for method, c in by.items():
             print(f"{task:9s} {method:12s} " + ", ".join(f"{k} {v}" for k, v in sorted(c.items())))
+    if args.md:
+        from dbtool.atomic import atomic_write_text
+        from dbtool.compare.labels import method_name
+
+        lines = ["| task | method | designs | motion classes (count, seeds) |",
+                 "| --- | --- | ---: | --- |"]
+        for task, by in counts.items():
+            for method, c in by.items():
+                seeds = {k: sorted(r["seed"] for r in rows if r["task"] == task
+                                   and r["method"] == method and r["class"] == k) for k in c}
+                text = "; ".join(f"{k} {v} (seed {', '.join(map(str, seeds[k]))})"
+                                 for k, v in sorted(c.items()))
+                lines.append(f"| {task} | {method_name(method)} | {sum(c.values())} | {text} |")
+        atomic_write_text(args.md, "\n".join(lines) + "\n")
+        print(f"wrote {args.md}")
     name = args.folder.name
     write_result({"folder": str(args.folder), "rows": rows,
                   "counts": {t: {m: dict(c) for m, c in by.items()} for t, by in counts.items()}},
