@@ -35,31 +35,26 @@ def one_thread():
     runtime.init("cpu", "f32", threads=None)
 
 
-def test_local_workers_score_bit_identically_to_serial(one_thread):
+def test_local_workers_score_and_run_epochs_bit_identically_to_serial(one_thread):
+    """One pool of two workers (kept between calls, as a design run keeps it between epochs):
+    its scores are the serial ones, a failure stays NaN, and two epochs of the embedding
+    optimiser scored by it are the serial epochs."""
     task = get_task("crawling")
     clouds = np.concatenate([_clouds("crawling"), np.full((1, 1024, 3), np.nan)])
     serial = score(clouds, task, STEPS)
-    assert np.isfinite(serial[:3]).all() and np.isnan(serial[3])  # a failure stays NaN
-    ticks = []
-    with Scorer("local", workers=2, threads=1) as s:
-        par = s(clouds, task, STEPS, progress=ticks.append)
-        again = s(clouds[:2], task, STEPS)  # the pool is kept between epochs
-    assert np.array_equal(par, serial, equal_nan=True) and len(ticks) == 4
-    assert np.array_equal(again, serial[:2])
-
-
-def test_an_epoch_scored_by_workers_is_the_serial_epoch(one_thread):
+    assert np.isfinite(serial[:3]).all() and np.isnan(serial[3])
     prior = Prior.load()
     emb, _ = preset("quick", "box")
     emb = replace(emb, samples_per_epoch=3, min_buffer=3, buffer_size=6, top_k=2,
                   batch_size=2, sample_steps=8)
-    rows = []
-    for scorer in (None, Scorer("local", workers=2, threads=1)):
-        opt = EmbeddingOptimiser(prior, get_task("box"), emb, prior.null(), seed=3,
-                                 n_steps=STEPS, scorer=scorer)
-        rows.append([opt.step(), opt.step()])
-        if scorer is not None:
-            scorer.close()
+    rows, ticks = [], []
+    with Scorer("local", workers=2, threads=1) as pool:
+        par = pool(clouds, task, STEPS, progress=ticks.append)
+        for scorer in (None, pool):
+            opt = EmbeddingOptimiser(prior, get_task("box"), emb, prior.null(), seed=3,
+                                     n_steps=STEPS, scorer=scorer)
+            rows.append([opt.step(), opt.step()])
+    assert np.array_equal(par, serial, equal_nan=True) and len(ticks) == 4
     assert rows[0] == rows[1]
     assert all(np.isfinite(r["max"]) for r in rows[0])
 
