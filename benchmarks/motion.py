@@ -40,7 +40,7 @@ def cell_motion(folder: Path) -> tuple[dict, dict] | None:
     if ro.metric != rec["metric"]:
         print(f"note: {folder.name} re-simulates to {ro.metric!r}, its cell says "
               f"{rec['metric']!r}", file=sys.stderr)
-    return rec, {**classify(task.name, ro.episode, ro.positions), "metric": ro.metric}
+    return rec, {**classify(ro.episode, ro.positions), "metric": ro.metric}
 
 
 def main() -> None:

@@ -44,17 +44,17 @@ def test_a_crawler_that_slides_moves_and_one_that_tips_or_sinks_topples():
     body = ep.robot_mask & (ep.particles.presence > 0)
     c = x0[body].mean(0)
     slide = np.stack([x0 + [0.002 * k, 0, 0] for k in range(11)])
-    got = classify("crawling", ep, slide)
+    got = classify(ep, slide)
     assert got["class"] == "moving" and got["turn_deg"] < 1e-3 and got["drop"] == 0
     height = np.ptp(x0[body, 1])
     w, v = np.linalg.eigh(np.cov((x0[body] - c).T))
     across = np.cross(v[:, np.argmax(w)], [0.0, 1.0, 0.0])  # tips the long axis over
     tip = np.stack([x0, *[_rotate(x0, 5 * k, c, across) for k in range(1, 11)]])
-    turned = classify("crawling", ep, tip)
+    turned = classify(ep, tip)
     assert turned["turn_deg"] == pytest.approx(50, abs=0.5) and turned["class"] == "toppling"
     sink = np.stack([x0, x0 - [0, 0.3 * height, 0]])
-    assert classify("crawling", ep, sink)["class"] == "toppling"
-    assert classify("crawling", ep, np.stack([x0, x0 - [0, 0.2 * height, 0]]))["class"] == \
+    assert classify(ep, sink)["class"] == "toppling"
+    assert classify(ep, np.stack([x0, x0 - [0, 0.2 * height, 0]]))["class"] == \
         "moving"
 
 
@@ -63,11 +63,11 @@ def test_a_hurdler_needs_a_flight_phase_to_be_moving():
     x0 = ep.particles.x0
     dx = ep.scene.dx
     ground = np.stack([x0 + [0.001 * k, 0, 0] for k in range(6)])
-    got = classify("hurdling", ep, ground)
+    got = classify(ep, ground)
     assert (got["class"], got["flight_steps"]) == ("sliding", 0)
     hop = ground.copy()
     hop[2:4, :, 1] += 2 * dx  # two steps clear of the ground (the obstacle is ahead)
-    got = classify("hurdling", ep, hop)
+    got = classify(ep, hop)
     assert (got["class"], got["flight_steps"]) == ("moving", 2)
 
 
@@ -85,12 +85,13 @@ def test_gripping_holding_tossing_pushing():
                 x[finger == f] = centre + [0, lift, sign * (side / 2 + 0.002)]
         return np.stack([x0, x])
 
-    assert classify("gripping", ep, last(0.003, (1, 2)))["class"] == "holding"
-    assert classify("gripping", ep, last(0.003, ()))["class"] == "tossing"
-    assert classify("gripping", ep, last(0.003, (2,)))["class"] == "one finger"
-    assert classify("gripping", ep, last(0.0, (1, 2)))["class"] == "pushing"
-    assert classify("gripping", ep, last(0.0005, ()))["class"] == "pushing"  # under 1 mm
-    assert classify("balancing", ep, np.stack([x0, x0])) is None
+    assert classify(ep, last(0.003, (1, 2)))["class"] == "holding"
+    assert classify(ep, last(0.003, ()))["class"] == "tossing"
+    assert classify(ep, last(0.003, (2,)))["class"] == "one finger"
+    assert classify(ep, last(0.0, (1, 2)))["class"] == "pushing"
+    assert classify(ep, last(0.0005, ()))["class"] == "pushing"  # under 1 mm
+    assert classify(ep, np.stack([x0, x0]), motion="") is None
+    assert [get_task(t).motion for t in ("balancing", "landing", "box")] == ["", "", ""]
 
 
 @pytest.mark.parametrize(("cell", "expected"), [("diffusebot-hurdling-s2", "toppling"),
@@ -100,5 +101,5 @@ def test_committed_designs_move_as_they_look(cell, expected):
     obstacle; its crawler crawls upright."""
     task, d, _ = _episode(cell)
     ro = simulate(task, d.robot, d.controller)
-    got = classify(task.name, ro.episode, ro.positions)
+    got = classify(ro.episode, ro.positions)
     assert got["class"] == expected, got

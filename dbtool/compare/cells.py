@@ -221,7 +221,7 @@ def _work(spec: CellSpec, log) -> dict:
     from dbtool.compare.motion import classify
 
     return {"metric": float(ro.metric), "info": out.info or {},
-            "motion": classify(task.name, ro.episode, ro.positions)}
+            "motion": classify(ro.episode, ro.positions)}
 
 
 def copy_cell(source: CellSpec, spec: CellSpec) -> dict:

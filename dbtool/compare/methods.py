@@ -174,13 +174,18 @@ def paper_plan(task: str, budget: Budget) -> dict:
         raise InputError(f"a budget of {budget.units} units is too small for DiffuseBot: it "
                          f"needs {int(cd) + 3} (two embedding epochs, one Langevin step, the "
                          "final evaluation)")
-    # Table 4 spends its designs as 20 epochs of 60 (3 designs per epoch per epoch); keep
-    # that shape: e epochs of 3e designs, at least 2 epochs
-    epochs = int(np.clip(round(np.sqrt(emb_units / 3)), 2, 20))
-    per_epoch = max(1, emb_units // epochs)
+    epochs, per_epoch = _epoch_shape(emb_units)
     return {"preset": "quick", "epochs": epochs, "samples_per_epoch": per_epoch,
             "codesign_samples": 1, "langevin_steps": steps, "line_search": search,
             "planned_units": epochs * per_epoch + cd + 1}
+
+
+def _epoch_shape(units: int) -> tuple[int, int]:
+    """``(epochs, designs per epoch)`` for ``units`` embedding units: Table 4 spends its
+    designs as 20 epochs of 60 (3 designs per epoch per epoch); e epochs of 3e designs, from
+    2 to 20 epochs."""
+    epochs = int(np.clip(round(np.sqrt(units / 3)), 2, 20))
+    return epochs, max(1, units // epochs)
 
 
 def _sized_epochs(task: str, budget: Budget, epochs: int, per_epoch: int,
@@ -250,8 +255,7 @@ def diffusebot_plan(task: str, budget: Budget) -> dict:
         raise InputError(f"a budget of {budget.units} units is too small for DiffuseBot: it "
                          f"needs {int(unit) + 3} (two embedding epochs, one refinement step, "
                          "the final evaluation)")
-    epochs = int(np.clip(round(np.sqrt(emb_units / 3)), 2, 20))
-    per_epoch = max(1, emb_units // epochs)
+    epochs, per_epoch = _epoch_shape(emb_units)
     return {"epochs": epochs, "samples_per_epoch": per_epoch, "refine_steps": steps,
             "line_search": search, "planned_units": epochs * per_epoch + unit * steps + 1}
 

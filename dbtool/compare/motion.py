@@ -2,18 +2,22 @@
 a motion class read off its rollout, so a table can say where a win comes from falling over
 or throwing rather than from a gait or a grasp.
 
-- **crawling, hurdling**: *toppling* when the body's long axis (the principal axis of its
+A task names the classes its rollouts take with its ``motion`` trait
+(:class:`dbtool.sim.tasks.base.Task`): ``"gait"`` (crawling), ``"leap"`` (a gait over an
+obstacle: hurdling), ``"grasp"`` (gripping) or ``""`` (none).
+
+- **gait, leap**: *toppling* when the body's long axis (the principal axis of its
   particles at the start, carried by the body's best-fit rotation, Kabsch) turns by more than
   45° at any step, or its centre drops by more than a quarter of its starting height;
-  otherwise *moving*. A hurdler must also have a flight phase, a step on which no particle of
+  otherwise *moving*. A leaper must also have a flight phase, a step on which no particle of
   the robot is within one grid cell of the ground or the obstacle; one that neither topples
   nor flies is *sliding*.
-- **gripping**, at the last step: *holding* (off the ground: the cube's lowest particle more
+- **grasp**, at the last step: *holding* (off the ground: the cube's lowest particle more
   than a fifth of a grid cell, 1 mm, above where it rested at the start; and a particle of
   each finger within a grid cell, 5 mm, of a cube particle), *tossing* (off the ground, no
   finger within a grid cell), *one finger* (off the ground, touching one finger), *pushing*
   (on the ground).
-- the other tasks: no class (None).
+- no trait: no class (None).
 """
 
 from __future__ import annotations
@@ -59,18 +63,20 @@ def _near(a: np.ndarray, b: np.ndarray, tol: float) -> bool:
     return float(cKDTree(b).query(a)[0].min()) <= tol
 
 
-def classify(task_name: str, episode, positions: np.ndarray) -> dict | None:
+def classify(episode, positions: np.ndarray, motion: str | None = None) -> dict | None:
     """The motion class of a rollout (module docstring) and the measurements behind it;
-    ``episode`` and ``positions`` as :func:`dbtool.sim.rollout.simulate` returns them.
+    ``episode`` and ``positions`` as :func:`dbtool.sim.rollout.simulate` returns them;
+    ``motion`` the kind of classes (default: the episode's task's ``motion`` trait).
 
     Example:
         >>> ro = simulate(task, design.robot, design.controller)  # doctest: +SKIP
-        >>> classify(task.name, ro.episode, ro.positions)["class"]  # doctest: +SKIP
+        >>> classify(ro.episode, ro.positions)["class"]  # doctest: +SKIP
         'moving'
     """
     scene, pr = episode.scene, episode.particles
     tol = float(scene.dx)
-    if task_name in ("crawling", "hurdling"):
+    motion = episode.task.motion if motion is None else motion
+    if motion in ("gait", "leap"):
         body = episode.robot_mask & (pr.presence > 0)
         xs = positions[:, body]
         turn = axis_turn(xs)
@@ -80,7 +86,7 @@ def classify(task_name: str, episode, positions: np.ndarray) -> dict | None:
         out = {"turn_deg": float(turn.max()), "turn_step": int(turn.argmax()),
                "turn_end_deg": float(turn[-1]), "drop": drop, "height": height}
         topple = out["turn_deg"] > TOPPLE_DEG or drop > DROP * height
-        if task_name == "hurdling":
+        if motion == "leap":
             flight = 0
             for x in xs:
                 clear = min(float(x[:, 1].min() - scene.ground_y),
@@ -91,7 +97,7 @@ def classify(task_name: str, episode, positions: np.ndarray) -> dict | None:
         else:
             out["class"] = "toppling" if topple else "moving"
         return out
-    if task_name == "gripping":
+    if motion == "grasp":
         x = positions[-1]
         cube = x[episode.object_mask]
         finger = episode.info["finger"]

@@ -61,6 +61,9 @@ class Task:
     # exports and the tendon bench mount it by that top face. Otherwise it stands on the ground.
     hangs = False
     object_stiffness = OBJECT_STIFFNESS  # Young's modulus of the task's cubes
+    # the motion classes its rollouts are sorted into (dbtool.compare.motion): "gait", "leap"
+    # (a gait with a flight phase over an obstacle), "grasp", or "" for none
+    motion = ""
     damping = 0.0  # material damping rate of the robot's particles (1/time; docs/method.md §3)
 
     def __init_subclass__(cls, **kwargs) -> None:

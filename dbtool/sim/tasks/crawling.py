@@ -13,6 +13,7 @@ FREQUENCY, AMPLITUDE = 30.0, 0.3
 
 class Crawling(Task):
     name = "crawling"
+    motion = "gait"
     setup = "robot at rest on the ground"
     metric_text = "x distance travelled by the robot's centre (presence-weighted centroid)"
     controller_text = ("4 groups by k-means in the xz plane, muscles parallel to gravity; sine "

@@ -34,6 +34,7 @@ FULL = (0.06, 0.08, 0.12)
 
 class Gripping(Task):
     name = "gripping"
+    motion = "grasp"
     setup = ("cube 0.03 on the ground, its centre 0.08 below the top of the gripper workspace "
              "0.06x0.08x0.12; robot = base glued to the upper boundary + two fingers, the "
              "designed finger and its mirror copy")

@@ -12,6 +12,7 @@ OBSTACLE = np.array([0.01, 0.03, 0.12])
 
 class Hurdling(Task):
     name = "hurdling"
+    motion = "leap"
     setup = ("obstacle 0.01x0.03x0.12 on the ground, its centre 0.07 in front (+x) of the "
              "robot's centre")
     metric_text = "x distance travelled by the robot's centre (high only by bounding over)"
