@@ -174,10 +174,12 @@ def main() -> None:
         # the paper epoch on the task whose co-design stop design-paper.json timed
         task = json.loads(PAPER.read_text())["task"] if name == "paper-epoch" else args.task
         result[name] = measure(name, task, args.repeats, root, args.extra)
-    if "paper-epoch" in result:
-        result["paper_run"] = extrapolate(result["paper-epoch"])
-    write_result(result, args.out, HERE / "results" / "design-parallel.json", False,
-                 {"task": args.task, "repeats": args.repeats, "parts": args.parts})
+        if name == "paper-epoch":
+            result["paper_run"] = extrapolate(result["paper-epoch"])
+        # written after each measurement, so a later failure keeps the finished ones
+        write_result(result, args.out, HERE / "results" / "design-parallel.json", False,
+                     {"task": args.task, "repeats": args.repeats, "parts": args.parts,
+                      "extra": args.extra})
 
 
 if __name__ == "__main__":
