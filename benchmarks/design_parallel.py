@@ -17,7 +17,8 @@ measurement must hand over the same design, bit for bit. From the paper epoch's 
 serial cost of a co-design stop (``benchmarks/results/design-paper.json``, measured by
 ``benchmarks/design.py``) the script extrapolates a full paper-preset run (20 epochs, 4 samples
 of 9 stops) to N workers; rows beyond 2 workers are labelled as extrapolated. Writes
-``benchmarks/results/design-parallel.json``.
+``benchmarks/results/design-parallel.json`` and its tables to ``docs/results/design-parallel.md``
+(``--md``; ``--cached`` redraws them from the JSON).
 
 Usage (on an otherwise idle machine)::
 
@@ -42,7 +43,11 @@ HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE))
 from _results import write_result  # noqa: E402
 
+from dbtool.atomic import atomic_write_text  # noqa: E402
+
 PAPER = HERE / "results" / "design-paper.json"
+RESULT = HERE / "results" / "design-parallel.json"
+MD = HERE.parent / "docs" / "results" / "design-parallel.md"
 MEASUREMENTS = {
     "quick": ([], [("local", 1), ("local", 2)]),
     "paper-epoch": (["--preset", "paper", "--epochs", "1", "--samples", "0"],
@@ -155,6 +160,36 @@ def extrapolate(epoch: dict, ns=(1, 2, 4, 8, 16, 32, 64)) -> dict:
             "epochs": full["epochs"], "rows": rows}
 
 
+def markdown(res: dict) -> str:
+    """The measured and extrapolated tables (docs/cluster.md includes them)."""
+    lines = []
+    for name, what in (("quick", "a `quick` design run"),
+                       ("paper-epoch", "one epoch of the `paper` preset (60 designs)")):
+        if name not in res:
+            continue
+        m = res[name]
+        lines += [f"Measured: {what} on {m['task']}, one thread per process, "
+                  f"{len(m['runs']) // len(m['summary'])} run(s) each, the design identical "
+                  f"bit for bit on every run: **{m['identical']}**.", "",
+                  "| executor | wall time (s) | waiting on the scoring (s) | the rest (s) | "
+                  "speed-up |", "| --- | ---: | ---: | ---: | ---: |"]
+        lines += [f"| `{s['executor']} --workers {s['workers']}` | {s['median_wall_s']:,.0f} | "
+                  f"{s['median_scoring_s']:,.0f} | {s['median_rest_s']:,.0f} | "
+                  f"{s['speedup']:.2f}x |" for s in m["summary"]]
+        lines.append("")
+    if "paper_run" in res:
+        p = res["paper_run"]
+        lines += [f"A whole `paper`-preset run: {p['epochs']} epochs of the epoch above, plus "
+                  f"{p['stops']} co-design stops (4 samples of 9) at {p['stop_s']:.0f} s each "
+                  f"(`benchmarks/results/{p['stop_source']}`), which run one after another "
+                  "in the design process:", "",
+                  "| workers | epoch (s) | run (h) | |", "| ---: | ---: | ---: | --- |"]
+        lines += [f"| {r['workers']} | {r['epoch_s']:,.0f} | {r['run_h']:.2f} | {r['label']} |"
+                  for r in p["rows"]]
+        lines.append("")
+    return "\n".join(lines)
+
+
 def main() -> None:
     if len(sys.argv) > 2 and sys.argv[1] == "--child":
         return child(sys.argv[2], sys.argv[3:])
@@ -166,7 +201,12 @@ def main() -> None:
                     help="further `dbtool design` options for every run (a smoke test of "
                     "this script: --extra --epochs 1 --refine 1 --samples-per-epoch 2)")
     ap.add_argument("--out", type=Path)
+    ap.add_argument("--md", type=Path, default=MD)
+    ap.add_argument("--cached", action="store_true", help="only redraw --md from the JSON")
     args = ap.parse_args()
+    if args.cached:
+        atomic_write_text(args.md, markdown(json.loads((args.out or RESULT).read_text())))
+        return print(f"wrote {args.md}")
     root = Path(tempfile.mkdtemp(prefix="design-parallel-"))
     os.environ.setdefault("TI_LOG_LEVEL", "warn")
     result = {"task": args.task, "cpus": os.cpu_count()}
@@ -177,9 +217,10 @@ def main() -> None:
         if name == "paper-epoch":
             result["paper_run"] = extrapolate(result["paper-epoch"])
         # written after each measurement, so a later failure keeps the finished ones
-        write_result(result, args.out, HERE / "results" / "design-parallel.json", False,
+        write_result(result, args.out, RESULT, False,
                      {"task": args.task, "repeats": args.repeats, "parts": args.parts,
                       "extra": args.extra})
+        atomic_write_text(args.md, markdown(result))
 
 
 if __name__ == "__main__":
