@@ -298,8 +298,8 @@ def _embedding_only(task: Task, budget: Budget, seed: int, log) -> Outcome:
     """All units on embedding epochs (Table 4's shape, e epochs of about 3e designs); the
     best design of the buffer."""
     free = budget.units - 1
-    epochs = int(np.clip(round(np.sqrt(free / 3)), 2, 20))
-    emb = _sized_epochs(task.name, budget, epochs, max(1, free // epochs))
+    epochs, per_epoch = _epoch_shape(free)
+    emb = _sized_epochs(task.name, budget, epochs, per_epoch)
     opt = _epochs(task, budget, seed, log, emb)
     if not opt.buffer.elite:
         raise RunError("no design of the embedding epochs could be robotized and simulated")
