@@ -7,7 +7,11 @@ best designs, the embedding and the units spent. A variant spends the rest of th
 (``units - 1 - epochs``, the final evaluation left out as in a cell) on its co-design phase:
 
 * ``refine``: the elite refined at ``t = 0`` (:mod:`dbtool.codesign.refine`), as many steps as
-  fit.
+  fit (DiffuseBot's default);
+* ``chains``: the buffer's best three designs refined by a third of those units each, the best
+  design of the three chains handed over (several shorter chains instead of one);
+* ``search1`` and ``search5``: the refinement with a line search of one length (``1x`` the
+  adaptive scale: more steps) or five (``0.25x`` to ``4x``: fewer steps).
 
 Each variant's result per (task, seed) is cached as JSON too, so an interrupted run continues.
 Prints a table per variant: its metric against the committed prior-sample cell's (best of 99
@@ -40,7 +44,9 @@ from dbtool.sim.tasks import TASKS, get_task  # noqa: E402
 
 HERE = Path(__file__).parent
 CELLS = HERE.parent / "docs" / "results" / "compare-standard" / "cells"
-VARIANTS = ("refine",)
+VARIANTS = ("refine", "chains", "search1", "search5")
+SEARCH = {"refine": (0.5, 1.0, 2.0), "chains": (0.5, 1.0, 2.0), "search1": (1.0,),
+          "search5": (0.25, 0.5, 1.0, 2.0, 4.0)}
 
 
 def _units(before: dict) -> float:
@@ -85,14 +91,21 @@ def run_variant(variant: str, task: str, seed: int, cache: Path) -> dict:
     free = get_budget("standard").units - 1 - ep["units"]
     before, t0 = dict(simulator.EPISODES), time.perf_counter()
     rows: list[dict] = []
-    if variant == "refine":
-        cfg = RefineConfig(steps=int(free // (GRAD_COST + 3)), gamma=ep["gamma"])
-        best = refine(get_task(task), ep["clouds"][0], float(ep["metrics"][0]), cfg, 100,
-                      on_step=rows.append)
-    else:
+    if variant not in SEARCH:
         raise SystemExit(f"unknown variant {variant}")
+    search = SEARCH[variant]
+    steps = int(free // (GRAD_COST + len(search)))
+    chains = 3 if variant == "chains" else 1
+    best = None
+    for i in range(min(chains, len(ep["metrics"]))):
+        cfg = RefineConfig(steps=steps // chains, search=search, gamma=ep["gamma"])
+        b = refine(get_task(task), ep["clouds"][i], float(ep["metrics"][i]), cfg, 100,
+                   on_step=lambda r, i=i: rows.append({"chain": i, **r}))
+        if best is None or b["metric"] > best["metric"]:
+            best = {**b, "chain": i}
     out = {"variant": variant, "task": task, "seed": seed, "metric": best["metric"],
            "start": float(ep["metrics"][0]), "best_step": best["step"],
+           "best_chain": best["chain"],
            "units": ep["units"] + _units(before), "seconds": time.perf_counter() - t0,
            "rows": rows}
     atomic_write_text(path, json.dumps(out, default=float))
@@ -130,8 +143,10 @@ def markdown(table: dict, summary: dict) -> str:
     for variant, tasks in table.items():
         out += [f"**{variant}**", "",
                 "| task | seeds | start (elite) | variant | prior samples | DiffuseBot (paper) "
-                "| variant − prior samples [95%] | variant − DiffuseBot (paper) [95%] |",
-                "| --- | --- | ---: | ---: | ---: | ---: | --- | --- |"]
+                "| variant − prior samples [95%] | variant − DiffuseBot (paper) [95%] |"
+                + (" variant − refine [95%] |" if variant != "refine" else ""),
+                "| --- | --- | ---: | ---: | ---: | ---: | --- | --- |"
+                + (" --- |" if variant != "refine" else "")]
         for task, rows in tasks.items():
             s = summary[variant][task]
             def mean(k, rows=rows):
@@ -141,7 +156,8 @@ def markdown(table: dict, summary: dict) -> str:
             out.append(f"| {task} | {', '.join(str(r['seed']) for r in rows)} | "
                        f"{num(mean('start'))} | {num(mean('metric'))} | {num(mean('prior'))} | "
                        f"{num(mean('diffusebot'))} | {diff(s['prior'])} | "
-                       f"{diff(s['diffusebot'])} |")
+                       f"{diff(s['diffusebot'])} |"
+                       + (f" {diff(s['refine'])} |" if variant != "refine" else ""))
         out.append("")
     return "\n".join(out)
 
@@ -176,13 +192,18 @@ def main() -> None:
                       f"{r['metric']:.5g} (step {r['best_step']}, {r['units']:.0f} units, "
                       f"{r['seconds']:.0f} s)  prior {r['prior']:.5g}  diffusebot "
                       f"{r['diffusebot']:.5g}", flush=True)
+    for variant, tasks in table.items():  # each change against the default it would replace
+        for task, rows in tasks.items():
+            ref = {r["seed"]: r["metric"] for r in table.get("refine", {}).get(task, [])}
+            for r in rows:
+                r["refine"] = ref.get(r["seed"]) if variant != "refine" else None
     summary: dict = {}
     print(f"\n{'variant':8s} {'task':9s} {'- prior samples [95%]':>34s} "
           f"{'- DiffuseBot [95%]':>34s}")
     for variant, tasks in table.items():
         for task, rows in tasks.items():
             s: dict = {}
-            for ref in ("prior", "diffusebot"):
+            for ref in ("prior", "diffusebot", "refine"):
                 d = [r["metric"] - r[ref] for r in rows if r[ref] is not None]
                 s[ref] = paired_stats(np.array(d))
             summary.setdefault(variant, {})[task] = s
