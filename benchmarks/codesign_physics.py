@@ -140,12 +140,14 @@ def main() -> None:
     ap.add_argument("--only", choices=["pool", "codesign"], default=None)
     ap.add_argument("--out", type=Path, default=None,
                     help="result file (default benchmarks/results/codesign-physics.json)")
+    ap.add_argument("--md", type=Path, default=None, help="also write the tables here")
     a = ap.parse_args()
     from dbtool.prior.sampling.pipeline import Prior
 
     prior = Prior.load()
     a.cache.mkdir(parents=True, exist_ok=True)
     result: dict = {"pool": a.pool, "codesign": a.codesign, "caption_pool": a.caption_pool}
+    md: list[str] = []
     for task in a.tasks:
         emb, cod = preset("quick", task)
         cod0 = replace(cod, kappa=0.0)
@@ -175,12 +177,14 @@ def main() -> None:
                              "pool_mean": float(np.nanmean(pool_a)), "pool_n": len(pool)})
         result[task] = {"rows": rows, "codesign": asdict(cod)}
         if rows:
-            report(task, rows)
+            md.append(f"**{get_task(task).title}**\n\n{report(task, rows)}")
     if a.only is None:
         write_result(result, a.out, HERE / "results" / "codesign-physics.json", False,
                      {"benchmark": "codesign-physics", "tasks": a.tasks, "seeds": a.seeds,
                       "pool": a.pool, "codesign": a.codesign,
                       "caption_pool": a.caption_pool})
+        if a.md:
+            atomic_write_text(a.md, "\n".join(md))
 
 
 def z_paired(d: list[float]) -> tuple[float, float, float]:
@@ -189,19 +193,28 @@ def z_paired(d: list[float]) -> tuple[float, float, float]:
     return m, s, m / (s / math.sqrt(len(d))) if s and s > 0 else float("inf")
 
 
-def report(task: str, rows: list[dict]) -> None:
-    print(f"\n{task}\n\n| condition | seed | kappa = 0 | kappa > 0 | made at | units | "
-          "best-of-N (N = units) |\n|---|---:|---:|---:|---|---:|---:|")
+def report(task: str, rows: list[dict]) -> str:
+    """The task's draws as a markdown table and the paired differences with their z (printed
+    and returned)."""
+    lines = [f"| condition | sampler seed | κ = 0 | κ > 0 | made at | units | "
+             "best-of-N (N = units) |", "| --- | ---: | ---: | ---: | --- | ---: | ---: |"]
     for r in rows:
         stop = "final sample" if r["stop"] is None else f"t = {r['stop']}"
-        print(f"| {r['condition']} | {r['seed']} | {r['kappa0']:.5f} | {r['kappa']:.5f} | "
-              f"{stop} | {r['units']:.0f} | {r['best_of_n']:.5f} |")
-    for name, key in (("kappa = 0", "kappa0"), ("best-of-N", "best_of_n")):
+        lines.append(f"| {r['condition']} | {r['seed']} | {r['kappa0']:.5f} | "
+                     f"{r['kappa']:.5f} | {stop} | {r['units']:.0f} | {r['best_of_n']:.5f} |")
+    lines.append(f"| mean | | {statistics.fmean(r['kappa0'] for r in rows):.5f} | "
+                 f"{statistics.fmean(r['kappa'] for r in rows):.5f} | | | "
+                 f"{statistics.fmean(r['best_of_n'] for r in rows):.5f} |")
+    lines.append("")
+    for name, key in (("κ = 0", "kappa0"), ("best-of-N", "best_of_n")):
         d = [r["kappa"] - r[key] for r in rows]
         m, s, z = z_paired(d)
         wins = sum(x > 0 for x in d)
-        print(f"{task}: kappa > 0 minus {name}: mean {m:+.5f} (sd {s:.5f}, n = {len(d)}, "
-              f"{wins} wins), z = {z:.2f}")
+        lines.append(f"- κ > 0 minus {name}: paired difference {m:+.5f} ± {s:.5f} (sd), "
+                     f"higher on {wins} of {len(d)}, z = {z:.2f}")
+    text = "\n".join(lines) + "\n"
+    print(f"\n{task}\n\n{text}")
+    return text
 
 
 if __name__ == "__main__":
