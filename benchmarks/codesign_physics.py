@@ -196,7 +196,7 @@ def z_paired(d: list[float]) -> tuple[float, float, float]:
 def report(task: str, rows: list[dict]) -> str:
     """The task's draws as a markdown table and the paired differences with their z (printed
     and returned)."""
-    lines = [f"| condition | sampler seed | κ = 0 | κ > 0 | made at | units | "
+    lines = ["| condition | sampler seed | κ = 0 | κ > 0 | made at | units | "
              "best-of-N (N = units) |", "| --- | ---: | ---: | ---: | --- | ---: | ---: |"]
     for r in rows:
         stop = "final sample" if r["stop"] is None else f"t = {r['stop']}"
