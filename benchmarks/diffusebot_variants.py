@@ -10,6 +10,10 @@ best designs, the embedding and the units spent. A variant spends the rest of th
   fit (DiffuseBot's default);
 * ``chains``: the buffer's best three designs refined by a third of those units each, the best
   design of the three chains handed over (several shorter chains instead of one);
+* ``noised``: the elite noised back to the chain's ``t_max`` (400) and co-designed from there
+  by the published chain (:func:`dbtool.compare.methods.chain_config`: stops from ``t_max``
+  to 0, each a gradient episode and a line search), as many stops as fit; the better of the
+  chain's best design and the elite handed over;
 * ``search1`` and ``search5``: the refinement with a line search of one length (``1x`` the
   adaptive scale: more steps) or five (``0.25x`` to ``4x``: fewer steps).
 
@@ -44,7 +48,7 @@ from dbtool.sim.tasks import TASKS, get_task  # noqa: E402
 
 HERE = Path(__file__).parent
 CELLS = HERE.parent / "docs" / "results" / "compare-standard" / "cells"
-VARIANTS = ("refine", "chains", "search1", "search5")
+VARIANTS = ("refine", "chains", "noised", "search1", "search5")
 SEARCH = {"refine": (0.5, 1.0, 2.0), "chains": (0.5, 1.0, 2.0), "search1": (1.0,),
           "search5": (0.25, 0.5, 1.0, 2.0, 4.0)}
 
@@ -85,14 +89,28 @@ def run_variant(variant: str, task: str, seed: int, cache: Path) -> dict:
     path = cache / f"{variant}-{task}-s{seed}.json"
     if path.exists():
         return json.loads(path.read_text())
-    from dbtool.codesign.refine import RefineConfig, refine
-
+    if variant not in (*SEARCH, "noised"):
+        raise SystemExit(f"unknown variant {variant}")
     ep = epochs(task, seed, cache)
     free = get_budget("standard").units - 1 - ep["units"]
     before, t0 = dict(simulator.EPISODES), time.perf_counter()
     rows: list[dict] = []
-    if variant not in SEARCH:
-        raise SystemExit(f"unknown variant {variant}")
+    if variant == "noised":
+        best = _noised(task, seed, ep, free, rows)
+    else:
+        best = _refined(variant, task, ep, free, rows)
+    out = {"variant": variant, "task": task, "seed": seed, "metric": best["metric"],
+           "start": float(ep["metrics"][0]), "best_step": best["step"],
+           "best_chain": best.get("chain", 0),
+           "units": ep["units"] + _units(before), "seconds": time.perf_counter() - t0,
+           "rows": rows}
+    atomic_write_text(path, json.dumps(out, default=float))
+    return out
+
+
+def _refined(variant: str, task: str, ep: dict, free: float, rows: list) -> dict:
+    from dbtool.codesign.refine import RefineConfig, refine
+
     search = SEARCH[variant]
     steps = int(free // (GRAD_COST + len(search)))
     chains = 3 if variant == "chains" else 1
@@ -103,13 +121,35 @@ def run_variant(variant: str, task: str, seed: int, cache: Path) -> dict:
                    on_step=lambda r, i=i: rows.append({"chain": i, **r}))
         if best is None or b["metric"] > best["metric"]:
             best = {**b, "chain": i}
-    out = {"variant": variant, "task": task, "seed": seed, "metric": best["metric"],
-           "start": float(ep["metrics"][0]), "best_step": best["step"],
-           "best_chain": best["chain"],
-           "units": ep["units"] + _units(before), "seconds": time.perf_counter() - t0,
-           "rows": rows}
-    atomic_write_text(path, json.dumps(out, default=float))
-    return out
+    return best
+
+
+def _noised(task: str, seed: int, ep: dict, free: float, rows: list) -> dict:
+    """The ``noised`` variant (module docstring); ``step`` of the result: the stop's
+    timestep that made the design, -1 for the elite itself."""
+    from dbtool.codesign.design_run import guidance_terms
+    from dbtool.codesign.embedding import score
+    from dbtool.codesign.langevin import codesign_sample
+    from dbtool.compare.methods import chain_config, diffusebot_configs, load_prior
+    from dbtool.prior.sampling.diffusion import SCALE
+
+    prior, t = load_prior(), get_task(task)
+    emb, _, _ = diffusebot_configs(task, get_budget("standard"))
+    k = int((free - 1) // (GRAD_COST + 3))  # stops, and the final sample's scoring
+    cod = chain_config(task, k, 3)
+    x0 = torch.as_tensor(np.asarray(ep["clouds"][0], np.float32) * SCALE)[None]
+    ab = float(prior.scheduler.alpha_bar(cod.t_max))
+    g = torch.Generator().manual_seed(seed * 1_000_003 + 20_011)
+    xt = ab ** 0.5 * x0 + (1 - ab) ** 0.5 * torch.randn(x0.shape, generator=g)
+    res = codesign_sample(prior, t, guidance_terms(prior, ep["c"], emb.guidance), cod,
+                          seed=seed * 1_000_003 + 10_007, steps=emb.sample_steps,
+                          n_steps=100, on_step=rows.append, x_start=xt, t_start=cod.t_max)
+    final = float(score(res.cloud[None], t, 100, controllers=[res.controller])[0])
+    cands = [{"cloud": ep["clouds"][0], "metric": float(ep["metrics"][0]), "step": -1},
+             {"cloud": res.cloud, "metric": final, "step": 0}]
+    if res.best is not None:
+        cands.append({"cloud": res.best.cloud, "metric": res.best.metric, "step": res.best.t})
+    return max((c for c in cands if np.isfinite(c["metric"])), key=lambda c: c["metric"])
 
 
 def paired_stats(d: np.ndarray) -> dict:

@@ -72,6 +72,33 @@ def test_codesign_sampler_logs_both_terms_and_co_optimises_the_controller(prior)
     assert np.allclose(res0.controller, task.controller(STEPS))
 
 
+def test_a_chain_started_from_a_noised_design_stays_near_it(prior):
+    """``x_start`` at ``t_start``: the chain starts from a design noised back to a middle
+    timestep (the ``noised`` variant of benchmarks/diffusebot_variants.py), takes its stops
+    from there, and ends nearer that design than a chain from pure noise does."""
+    from dbtool.prior.sampling.diffusion import SCALE
+
+    task = get_task("crawling")
+    c = prior.embed("a block")
+    cfg = CodesignConfig(t_max=200, dt=100, K=1, kappa=0.0)
+    design = prior.sample("an U shape", n=1, steps=8, seed=3).clouds[0]
+    ab = float(prior.scheduler.alpha_bar(200))
+    g = torch.Generator().manual_seed(0)
+    x0 = torch.as_tensor(design * SCALE, dtype=torch.float32)[None]
+    xt = ab ** 0.5 * x0 + (1 - ab) ** 0.5 * torch.randn(x0.shape, generator=g)
+    rows = []
+    res = codesign_sample(prior, task, [(c, 3.0)], cfg, seed=0, steps=8, n_steps=STEPS,
+                          on_step=rows.append, x_start=xt, t_start=200)
+    fresh = codesign_sample(prior, task, [(c, 3.0)], cfg, seed=0, steps=8, n_steps=STEPS)
+    assert [r["t"] for r in rows] == [200, 100, 0]
+
+    def chamfer(a, b):
+        d = np.linalg.norm(a[:, None] - b[None], axis=-1)
+        return d.min(0).mean() + d.min(1).mean()
+
+    assert chamfer(res.cloud, design) < 0.5 * chamfer(fresh.cloud, design)
+
+
 def test_line_search_moves_along_the_gradient_and_hands_over_the_best_design(prior):
     """The default step: at each stop the simulator scores x0_hat and the designs
     ``x0_hat + a g / rms(g)`` of the line search; x_t moves by the best ``a`` (0 if none

@@ -264,14 +264,17 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
                     n_steps: int = N_STEPS, controller: np.ndarray | None = None,
                     on_step: Callable[[dict], None] | None = None,
                     on_stop: Callable[[ChainState], None] | None = None,
-                    resume: ChainState | None = None) -> CodesignResult:
+                    resume: ChainState | None = None, x_start: torch.Tensor | None = None,
+                    t_start: int | None = None) -> CodesignResult:
     """One design sampled with the co-design Langevin steps (module docstring).
 
     ``conds`` are the guidance terms (the optimised embedding and, for text feedback, the
     prompt); ``kappa = 0`` gives the plain denoising loop plus score-only Langevin steps (the
     ablation). Failures of the robotizer or the simulator at a noisy x_t skip the physics
     term of that step (recorded in the history). ``on_stop`` receives the chain's state after
-    each stop; ``resume`` (such a state, with the same arguments otherwise) continues it."""
+    each stop; ``resume`` (such a state, with the same arguments otherwise) continues it.
+    ``x_start`` at timestep ``t_start`` (model space, (1, N, 3)) starts the chain there
+    instead of from noise at ``T``: a design noised back to ``t_start``, say."""
     sched = prior.scheduler
     chain = _Chain(None)
     if task.n_groups > 0:
@@ -289,7 +292,8 @@ def codesign_sample(prior, task: Task, conds: Sequence[tuple[torch.Tensor, float
         history, trajectory = list(resume.history), list(resume.trajectory)
     last = None
     for step in prior.denoising_loop(conds, 1, steps, seed, include=at, generator=dgen,
-                                     x_T=None if resume is None else resume.x,
+                                     x_T=x_start if resume is None else resume.x,
+                                     t_start=t_start,
                                      start=0 if resume is None else resume.index):
         last = step
         if step.t not in at or cfg.K < 1 or (resume is not None and step.index == resume.index):
