@@ -95,9 +95,11 @@ def one_run(task: str, executor: str, workers: int, root: Path, extra: list[str]
         arrays = {k: d[k] for k in d.files}
     rows = [json.loads(line) for line in (out / "metrics.jsonl").open()]
     t = json.loads(times.read_text())
+    # the design handed over: the final row's metric, or the epochs' best (an epochs-only run)
+    metric = next((r["metric"] for r in reversed(rows) if "metric" in r),
+                  max((r["max"] for r in rows if "max" in r), default=float("nan")))
     return {"executor": executor, "workers": workers, "wall_s": wall, "arrays": arrays,
-            "scoring_s": t["scoring_s"], "scoring_calls": t["calls"],
-            "metric": next(r["metric"] for r in reversed(rows) if "metric" in r)}
+            "scoring_s": t["scoring_s"], "scoring_calls": t["calls"], "metric": metric}
 
 
 def measure(name: str, task: str, repeats: int, root: Path, extra: list[str]) -> dict:
@@ -209,7 +211,10 @@ def main() -> None:
         return print(f"wrote {args.md}")
     root = Path(tempfile.mkdtemp(prefix="design-parallel-"))
     os.environ.setdefault("TI_LOG_LEVEL", "warn")
-    result = {"task": args.task, "cpus": os.cpu_count()}
+    # a run of some parts keeps the other parts' last measurement
+    result = {k: v for k, v in json.loads(RESULT.read_text()).items() if k in MEASUREMENTS} \
+        if args.out is None and RESULT.exists() else {}
+    result.update({"task": args.task, "cpus": os.cpu_count()})
     for name in args.parts:
         # the paper epoch on the task whose co-design stop design-paper.json timed
         task = json.loads(PAPER.read_text())["task"] if name == "paper-epoch" else args.task
