@@ -138,9 +138,8 @@ def _noised(task: str, seed: int, ep: dict, free: float, rows: list) -> dict:
     k = int((free - 1) // (GRAD_COST + 3))  # stops, and the final sample's scoring
     cod = chain_config(task, k, 3)
     x0 = torch.as_tensor(np.asarray(ep["clouds"][0], np.float32) * SCALE)[None]
-    ab = float(prior.scheduler.alpha_bar(cod.t_max))
     g = torch.Generator().manual_seed(seed * 1_000_003 + 20_011)
-    xt = ab ** 0.5 * x0 + (1 - ab) ** 0.5 * torch.randn(x0.shape, generator=g)
+    xt = prior.scheduler.add_noise(x0, torch.randn(x0.shape, generator=g), cod.t_max)
     res = codesign_sample(prior, t, guidance_terms(prior, ep["c"], emb.guidance), cod,
                           seed=seed * 1_000_003 + 10_007, steps=emb.sample_steps,
                           n_steps=100, on_step=rows.append, x_start=xt, t_start=cod.t_max)

@@ -82,10 +82,9 @@ def test_a_chain_started_from_a_noised_design_denoises_it(prior):
     task = get_task("crawling")
     c = prior.embed("an U shape")
     design = prior.sample("an U shape", n=1, steps=8, seed=3).clouds[0]
-    ab = float(prior.scheduler.alpha_bar(200))
     g = torch.Generator().manual_seed(0)
     x0 = torch.as_tensor(design * SCALE, dtype=torch.float32)[None]
-    xt = ab ** 0.5 * x0 + (1 - ab) ** 0.5 * torch.randn(x0.shape, generator=g)
+    xt = prior.scheduler.add_noise(x0, torch.randn(x0.shape, generator=g), 200)
     cfg = CodesignConfig(t_max=200, dt=100, K=1, kappa=0.0, step_scale=0.0, sigma_beta=0.0)
     res = codesign_sample(prior, task, [(c, 3.0)], cfg, seed=0, steps=8, n_steps=STEPS,
                           x_start=xt, t_start=200)
