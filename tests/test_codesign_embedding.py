@@ -130,7 +130,33 @@ def test_one_epoch_samples_scores_and_trains():
     row = opt.step()
     assert row["epoch"] == 0 and len(row["metrics"]) == 2 and row["buffer"] >= 1
     assert row["loss"] is not None and np.isfinite(row["loss"])
+    assert row["spread"] > emb.signal  # the two crawlers moved differently: it trained
     assert opt.epoch == 1
+
+
+def test_an_epoch_without_signal_leaves_the_embedding_where_it_was():
+    """No signal, no step: after 4 control steps of moving a box no design has moved the cube
+    by 1 um, so the top-k is a random pick; the default skips the step, the published
+    algorithm (``signal = 0``) takes it on the same designs."""
+    from dataclasses import replace
+
+    emb = replace(preset("quick", "box")[0], samples_per_epoch=3, min_buffer=3, top_k=2,
+                  batch_size=2, sample_steps=8)
+    prior = Prior.load(with_upsampler=False)
+    runs = {}
+    for signal in (emb.signal, 0.0):
+        opt = EmbeddingOptimiser(prior, get_task("box"), replace(emb, signal=signal),
+                                 prior.null(), seed=0, n_steps=4)
+        before = [p.detach().clone() for p in opt.embedding.parameters()]
+        row = opt.step()
+        after = opt.embedding.parameters()
+        moved = any(not torch.equal(a, b) for a, b in zip(before, after, strict=True))
+        runs[signal] = (row, moved)
+    (row, moved), (paper, paper_moved) = runs[emb.signal], runs[0.0]
+    assert emb.signal == 1e-6 and row["buffer"] == 3 and 0.0 <= row["spread"] <= emb.signal
+    assert row["loss"] is None and not moved
+    assert paper["metrics"] == row["metrics"]  # the same three designs
+    assert paper["loss"] is not None and paper_moved
 
 
 def test_embedding_starts_at_its_condition_and_stays_in_the_captions_hull():

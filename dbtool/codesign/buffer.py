@@ -55,6 +55,17 @@ class Buffer:
         self.entries = (self.entries + new)[-self.capacity:]
         self.elite = sorted(self.elite + new, key=lambda e: -e.metric)[:self.keep]
 
+    def spread(self) -> float:
+        """How far apart the buffer's scores are (best minus worst; 0 when empty): the
+        signal a training step has to rank designs by.
+
+        >>> b = Buffer(4); b.add(np.zeros((2, 3, 3)), np.array([0.5, 0.25]), epoch=0)
+        >>> b.spread()
+        0.25
+        """
+        m = [e.metric for e in self.entries]
+        return max(m) - min(m) if m else 0.0
+
     def training_set(self, top_k: int, elite: bool = False) -> list[Entry]:
         """The ``top_k`` entries by metric, best first: the best of the most recent designs
         (the buffer is a FIFO, so old designs leave it), or with ``elite`` the best of those

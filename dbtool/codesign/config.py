@@ -50,6 +50,10 @@ class EmbeddingConfig:
     free_lr: float = 2e-3  # Adam on the raw 384-d c (space "free"; unit-norm captions)
     baseline: bool = False  # subtract the loss on the newest unfiltered samples
     elite: bool = False  # train on the top-k of the FIFO and of the best designs ever
+    # no signal, no step: an epoch trains only when the buffer's scores spread by more than
+    # this (task units; 0: always, as the paper). Where no design touches the task's object
+    # the top-k are a random pick, and training on them steers c away from the prior
+    signal: float = 0.0
 
     def __post_init__(self) -> None:
         _choice("space", self.space, SPACES)
@@ -117,6 +121,7 @@ TABLE5 = {
 }
 
 PRESETS = ("paper", "quick")
+SIGNAL = 1e-6  # the quick preset's least score spread to train on: 1 um of task distance
 
 
 def preset(name: str, task: str) -> tuple[EmbeddingConfig, CodesignConfig]:
@@ -129,7 +134,8 @@ def preset(name: str, task: str) -> tuple[EmbeddingConfig, CodesignConfig]:
     if name == "quick":
         ratio = emb.buffer_size // emb.samples_per_epoch  # epochs the buffer remembers
         emb = replace(emb, samples_per_epoch=12, min_buffer=12, buffer_size=12 * ratio,
-                      top_k=3, batch_size=4, train_iters=4, epochs=4, sample_steps=32)
+                      top_k=3, batch_size=4, train_iters=4, epochs=4, sample_steps=32,
+                      signal=SIGNAL)
         # fresh samples (on request) take five stops; co-design from the elite takes ten
         # refinement steps, the units of the two fresh samples the preset took before
         # (docs/method.md §5); both rescale the paper's drift budget

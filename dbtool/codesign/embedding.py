@@ -3,7 +3,8 @@ on self-generated, performance-filtered designs with the diffusion loss, theta f
 
 Each epoch: sample ``samples_per_epoch`` designs from c, robotize and simulate them (forward
 only) to get their performance, add them to the buffer; once it holds ``min_buffer`` entries,
-run ``train_iters`` Adam steps on ``min_c E ||eps - eps_theta(x_t(x_0, eps), t, c)||^2`` with
+run ``train_iters`` Adam steps (only where the buffer's scores spread by more than
+``signal``) on ``min_c E ||eps - eps_theta(x_t(x_0, eps), t, c)||^2`` with
 batches from the buffer's training set (its top-k, with ``elite`` over the best designs
 ever seen as well). The condition is never
 dropped during these steps (``p_uncond = 0``): c is what is being learned.
@@ -234,7 +235,8 @@ class EmbeddingOptimiser:
         metrics = (self.scorer or score)(clouds, self.task, self.n_steps, progress)
         self.buffer.add(clouds, metrics, self.epoch, atoms)
         losses = []
-        if len(self.buffer) >= cfg.min_buffer:
+        spread = self.buffer.spread()
+        if len(self.buffer) >= cfg.min_buffer and (cfg.signal <= 0 or spread > cfg.signal):
             entries = self.buffer.training_set(cfg.top_k, cfg.elite)
             if self.embedding.space == "mixture":
                 losses = [mixture_step(self.embedding, self.opt, entries, cfg.batch_size,
@@ -248,7 +250,7 @@ class EmbeddingOptimiser:
         row = {"epoch": self.epoch, "mean": float(ok.mean()) if len(ok) else float("nan"),
                "max": float(ok.max()) if len(ok) else float("nan"),
                "failed": int(len(metrics) - len(ok)), "buffer": len(self.buffer),
-               "loss": float(np.mean(losses)) if losses else None,
+               "loss": float(np.mean(losses)) if losses else None, "spread": spread,
                "metrics": [float(m) for m in metrics], "atoms": [int(a) for a in atoms]}
         self.history.append(row)
         self.epoch += 1

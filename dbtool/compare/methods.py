@@ -227,8 +227,8 @@ def paper_configs(task: str, budget: Budget):
     from dbtool.codesign.config import preset
 
     plan = paper_plan(task, budget)
-    emb = _sized_epochs(task, budget, plan["epochs"], plan["samples_per_epoch"],
-                        plan["preset"])
+    emb = replace(_sized_epochs(task, budget, plan["epochs"], plan["samples_per_epoch"],
+                                plan["preset"]), signal=0.0)  # trains every epoch, as published
     _, cod = preset(plan["preset"], task)
     if plan["preset"] == "quick":
         cod = chain_config(task, plan["langevin_steps"], plan["line_search"])
@@ -341,7 +341,7 @@ def _epochs(task: Task, budget: Budget, seed: int, log, emb):
     for _ in range(emb.epochs):
         row = opt.step()
         log(phase="embedding", epoch=row["epoch"], mean=row["mean"], max=row["max"],
-            failed=row["failed"], loss=row["loss"])
+            failed=row["failed"], loss=row["loss"], spread=row["spread"])
     return opt
 
 
