@@ -3,8 +3,11 @@
 # usage: save_compare.sh SRC DST
 src=$1; dst=$2
 mkdir -p "$dst/cells"
-cp "$src"/compare.json "$src"/manifest.json "$dst"/ 2>/dev/null
-cp "$src"/results.csv "$dst"/ 2>/dev/null
+# the folder's own files only the first time: several runs (one per method and commit) fill
+# the same table, and benchmarks/compare_report.py redraws its report from the cells
+for f in compare.json manifest.json results.csv; do
+  [ -f "$dst/$f" ] || cp "$src/$f" "$dst/" 2>/dev/null
+done
 for c in "$src"/cells/*; do
   if grep -q '"status": "done"' "$c/cell.json" 2>/dev/null; then
     mkdir -p "$dst/cells/$(basename $c)"
