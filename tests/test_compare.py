@@ -394,6 +394,7 @@ def test_every_method_fits_the_budget(name):
                                               plan["langevin_steps"]))
         assert (emb.epochs, emb.samples_per_epoch, cod.samples, n_steps(cod)) == sizes[:4]
         assert emb.sample_steps == budget.sample_steps and cod.refine == 0
+        assert emb.signal == 0.0  # as published: the embedding trains on every epoch
         if name in ("smoke", "quick"):  # one stop: at t_min with the line search, else t_max
             assert stops(cod) == [0 if search else TABLE5[task].t_max]
         elif name == "standard":  # six stops spread over Table 5's [t_min, t_max]
@@ -410,6 +411,7 @@ def test_every_method_fits_the_budget(name):
         assert new["planned_units"] == (new["epochs"] * new["samples_per_epoch"] + 1 + used(
             ref.steps * (1 + len(ref.search)), ref.steps)) <= budget.units
         assert ref.gamma * ref.steps == pytest.approx(TABLE5[task].gamma * n_steps(TABLE5[task]))
+        assert emb2.signal == 1e-6  # no signal, no step
         if name == "standard":
             assert (emb2.epochs, emb2.samples_per_epoch) == (emb.epochs, emb.samples_per_epoch)
 
