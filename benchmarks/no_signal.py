@@ -44,6 +44,27 @@ def changed(cell: Path, signal: float = SIGNAL) -> bool:
     return any(r["max"] - r["mean"] <= signal for r in _rows(cell) if r["phase"] == "embedding")
 
 
+def rerun(cells: Path, task: str, seed: str) -> dict:
+    """Run DiffuseBot's embedding epochs of ``task`` and ``seed`` at the `standard` budget
+    with the code as it is now, and compare each epoch's mean, maximum and loss with the
+    committed cell's progress rows."""
+    from dbtool.compare.budget import get_budget
+    from dbtool.compare.methods import _epochs, diffusebot_configs
+    from dbtool.sim.tasks import get_task
+
+    budget = get_budget("standard")
+    emb, _, _ = diffusebot_configs(task, budget)
+    new: list[dict] = []
+    _epochs(get_task(task), budget, int(seed), lambda **r: new.append(r), emb)
+    cell = cells / f"diffusebot-{task}-s{seed}"
+    old = [r for r in _rows(cell) if r["phase"] == "embedding"]
+    same = len(new) == len(old) and all(
+        (n["mean"], n["max"], n["loss"]) == (o["mean"], o["max"], o["loss"])
+        for n, o in zip(new, old, strict=True))
+    return {"cell": cell.name, "epochs": len(new), "identical": same,
+            "spread": [n["spread"] for n in new]}
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--before", type=Path, default=STATE / "no-signal" / "before",
@@ -53,6 +74,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--prior", type=Path, nargs="+",
                     default=[STATE / "compare-standard8" / "cells",
                              STATE / "compare-standard" / "cells"])
+    ap.add_argument("--rerun", nargs=2, metavar=("TASK", "SEED"),
+                    help="rerun this cell's embedding epochs under the rule (minutes) and "
+                         "check them against its committed progress rows, bit for bit")
     ap.add_argument("--out", type=Path, default=HERE / "results" / "no-signal.json")
     ap.add_argument("--md", type=Path,
                     default=HERE.parent / "docs" / "results" / "no-signal.md")
@@ -85,7 +109,12 @@ def main(argv: list[str] | None = None) -> None:
               f"as the previous default does: the rule leaves them as they were."]
     print("\n".join(lines))
     atomic_write_text(a.md, "\n".join(lines) + "\n")
-    write_result({"signal": SIGNAL, "rows": rows, "unchanged": same}, a.out, a.out, False,
+    check = rerun(a.after, *a.rerun) if a.rerun else None
+    if check:
+        print(f"{check['cell']}: {check['epochs']} epochs rerun under the rule, "
+              f"identical to the committed rows: {check['identical']}")
+    write_result({"signal": SIGNAL, "rows": rows, "unchanged": same, "rerun": check},
+                 a.out, a.out, False,
                  {"before": str(a.before), "after": str(a.after), "signal": SIGNAL})
 
 
