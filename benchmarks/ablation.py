@@ -89,9 +89,10 @@ def main(argv: list[str] | None = None) -> None:
         cells = [_fmt(pairs.get((part, other, t))) for t in TASKS]
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     n = sorted({d["n"] for d in pairs.values()})
+    span = f"{n[0]}" if len(n) == 1 else f"{n[0]}–{n[-1]}"
     lines += ["", f"Paired mean difference of the task metric over seeds "
-              f"{', '.join(map(str, sorted(seeds)))} ({'–'.join(map(str, n[::max(1, len(n) - 1)]))} "
-              f"per entry), [95% interval, Student's t]; `standard` budget, 100 units a cell."]
+              f"{', '.join(map(str, sorted(seeds)))} ({span} per entry) [95% interval, "
+              f"Student's t]; `standard` budget, 100 units a cell."]
     text = "\n".join(lines) + "\n"
     print(text)
     atomic_write_text(a.md, text)
