@@ -397,5 +397,7 @@ def test_runs_from_before_co_design_from_the_elite_resume_as_they_were():
     assert s.configs()[1].refine == 0
     assert Settings.saved({**old, "preset": "paper"}).samples is None  # the paper's 4
     assert Settings.saved({**old, "samples": 3}).samples == 3
-    new = Settings.saved({**old, "refine": None, "prior": 2})  # a run of today
+    assert s.configs()[0].signal == 0.0  # and trains on every epoch, as runs then did
+    new = Settings.saved({**old, "refine": None, "prior": 2, "signal": None})  # of today
     assert (new.samples, new.refine) == (None, None) and new.configs()[1].refine == 10
+    assert new.configs()[0].signal == 1e-6

@@ -188,17 +188,19 @@ class Settings:
     sample_steps: int | None = None  # denoising steps per design; None: the preset's
     prior: int | None = None  # shipped prior version; None: the default (recorded at start)
     refine: int | None = None  # refinement steps of the best design; None: the preset's
+    signal: float | None = None  # least score spread an epoch trains on; None: the preset's
 
     @classmethod
     def saved(cls, d: dict) -> Settings:
         """The settings a run's checkpoint recorded, as that run used them: runs from before
         the prompt window had the prompt on every step, runs from before the prior option
-        sampled version 1, and runs from before co-design from the elite drew the quick
-        preset's two fresh samples and refined nothing."""
+        sampled version 1, runs from before co-design from the elite drew the quick
+        preset's two fresh samples and refined nothing, and runs from before "no signal, no
+        step" trained the embedding on every epoch."""
         if "refine" not in d:
             d = {**d, "refine": 0, "samples": d.get("samples") or
                  (2 if d.get("preset", "quick") == "quick" else None)}
-        return cls(**{"prompt_t_min": 0, "prior": 1, **d})
+        return cls(**{"prompt_t_min": 0, "prior": 1, "signal": 0.0, **d})
 
     def check(self) -> None:
         """Refuse settings no run can use (:class:`~dbtool.errors.InputError`, one line),
@@ -232,6 +234,8 @@ class Settings:
                           top_k=min(emb.top_k, s), batch_size=min(emb.batch_size, s))
         if self.sample_steps is not None:
             emb = replace(emb, sample_steps=self.sample_steps)
+        if self.signal is not None:
+            emb = replace(emb, signal=self.signal)
         if self.refine is not None:
             paper = TABLE5[self.task]
             cod = replace(cod, refine=self.refine, refine_gamma=paper.gamma * n_steps(paper)
