@@ -54,9 +54,14 @@ class EmbeddingConfig:
     # this (task units; 0: always, as the paper). Where no design touches the task's object
     # the top-k are a random pick, and training on them steers c away from the prior
     signal: float = 0.0
+    # share of each epoch's draws from the start mixture instead of the trained one (space
+    # "mixture"; 0: none, as the paper)
+    explore: float = 0.0
 
     def __post_init__(self) -> None:
         _choice("space", self.space, SPACES)
+        if not 0.0 <= self.explore <= 1.0:
+            raise InputError(f"explore must be between 0 and 1; got {self.explore}")
 
 
 @dataclass(frozen=True)

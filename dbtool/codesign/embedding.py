@@ -139,6 +139,7 @@ class Embedding(torch.nn.Module):
         if not (space == "mixture" and null):
             w[0] = float(np.log(start_weight * (n - 1) / (1 - start_weight)))
         self.w = torch.nn.Parameter(w)
+        self.p0 = torch.softmax(w, 0)  # the start mixture (not state: checkpoints predate it)
 
     def forward(self) -> torch.Tensor:
         if self.space == "free":
@@ -156,10 +157,13 @@ class Embedding(torch.nn.Module):
                 return self.atoms[int(self.w.argmax())][None].clone()
             return self().detach().clone()
 
-    def draw(self, n: int, gen: torch.Generator) -> torch.Tensor:
-        """Atom indices of ``n`` designs of the mixture, ``k ~ softmax(w)``."""
-        return torch.multinomial(torch.softmax(self.w.detach(), 0), n, replacement=True,
-                                 generator=gen)
+    def draw(self, n: int, gen: torch.Generator, explore: float = 0.0) -> torch.Tensor:
+        """Atom indices of ``n`` designs of the mixture, ``k ~ softmax(w)``, or with
+        ``explore`` of ``(1 - explore) softmax(w) + explore p0``, ``p0`` the start mixture."""
+        p = torch.softmax(self.w.detach(), 0)
+        if explore > 0:
+            p = (1 - explore) * p + explore * self.p0
+        return torch.multinomial(p, n, replacement=True, generator=gen)
 
 
 def mixture_step(emb: Embedding, opt: torch.optim.Optimizer, entries: list[Entry],
@@ -218,7 +222,7 @@ class EmbeddingOptimiser:
         """``n`` designs (x_0 clouds, prior frame) from the current embedding, and the atom
         each was sampled from (-1 unless the space is ``mixture``)."""
         if self.embedding.space == "mixture":
-            k = self.embedding.draw(n, torch.Generator().manual_seed(seed))
+            k = self.embedding.draw(n, torch.Generator().manual_seed(seed), self.cfg.explore)
             atoms, cond = k.numpy(), self.embedding.atoms[k]
         else:
             atoms, cond = np.full(n, -1), self.current()

@@ -278,10 +278,13 @@ def diffusebot_configs(task: str, budget: Budget):
     return emb, ref, plan
 
 
-def _diffusebot(task: Task, budget: Budget, seed: int, log) -> Outcome:
+def _diffusebot(task: Task, budget: Budget, seed: int, log, **changes) -> Outcome:
+    """DiffuseBot's default at ``budget``; ``changes`` replace fields of its embedding config
+    (a variant measured against it, ``benchmarks/explore.py``)."""
     from dbtool.codesign.refine import refine
 
     emb, ref, plan = diffusebot_configs(task.name, budget)
+    emb = replace(emb, **changes)
     opt = _epochs(task, budget, seed, log, emb)
     if not opt.buffer.elite:
         raise RunError("no design of the embedding epochs could be robotized and simulated")
