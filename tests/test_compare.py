@@ -106,11 +106,12 @@ def test_serial_smoke_comparison(serial_run):
         progress = [json.loads(line) for line in (cell / "metrics.jsonl").read_text()
                     .splitlines()]
         if r["method"] not in GRADIENT and r["method"] != "prior":
-            # two epochs of one design, one refinement step (a gradient episode and a line
-            # search of one length, none where the gradient is zero), the final evaluation
+            # two epochs of one design, one refinement step (a gradient episode, counted as
+            # a forward and a backward, and a line search of one length, none where the
+            # gradient is zero), the final evaluation
             search = [len(p["search"]) for p in progress if p["phase"] == "refine"]
             assert len(search) == 1 and search[0] in (0, 1)
-            assert (fwd, grad) == (2 + search[0] + 1, 1)
+            assert (fwd, grad) == (2 + 1 + search[0] + 1, 1)
             planned = diffusebot_plan(r["task"], get_budget("smoke"))["planned_units"]
             assert float(r["budget_used"]) == planned - 1 + search[0]
         for name in CELL_FILES:
