@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from dbtool.codesign.buffer import Buffer
-from dbtool.codesign.config import TABLE4, TABLE5, preset
+from dbtool.codesign.config import TABLE4, TABLE5, EmbeddingConfig, preset
 from dbtool.codesign.embedding import (
     Embedding,
     EmbeddingOptimiser,
@@ -13,6 +13,7 @@ from dbtool.codesign.embedding import (
     guided_loss,
     train_step,
 )
+from dbtool.errors import InputError
 from dbtool.prior.corpora.shapes import make_shape
 from dbtool.prior.sampling import text
 from dbtool.prior.sampling.diffusion import diffusion_loss
@@ -219,6 +220,17 @@ def test_mixture_draws_designs_from_atoms_and_trains_toward_the_elite_atoms():
     buf.add(np.zeros((1, 4, 3)), np.ones(1), 1)  # a design without an atom
     with pytest.raises(ValueError, match="record their atom"):
         mixture_step(null, opt, buf.training_set(1), 1, gen)
+    # exploration: a share of the draws from the start mixture (uniform), the rest from the
+    # trained one; none by default, which draws exactly as before
+    g = torch.Generator
+    assert torch.equal(null.draw(12, g().manual_seed(3), 0.0), null.draw(12, g().manual_seed(3)))
+    n = 20_000
+    trained = null.draw(n, g().manual_seed(1))
+    half = null.draw(n, g().manual_seed(1), 0.5)
+    share = [float(((k == egg) | (k == cyl)).float().mean()) for k in (trained, half)]
+    assert share[0] > 0.9 and share[1] == pytest.approx(0.5 * share[0] + 0.5 * 2 / 29, abs=0.01)
+    with pytest.raises(InputError, match="explore must be between 0 and 1"):
+        EmbeddingConfig(buffer_size=60, explore=1.5)
 
 
 def test_prior_samples_one_condition_per_design():
