@@ -22,6 +22,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).parent))
 from _results import write_result  # noqa: E402
 
@@ -88,10 +90,28 @@ def main(argv: list[str] | None = None) -> None:
                   flush=True)
     lines = [f"| task | seed | explore {a.explore:g} | default | prior samples | "
              "explore − default |", "| --- | ---: | ---: | ---: | ---: | ---: |"]
+    def g(x: float | None) -> str:
+        return "not run" if x is None else f"{x:.5f}"
+
     for r in results:
         diff = "" if r["default"] is None else f"{r['metric'] - r['default']:+.4g}"
-        lines.append(f"| {r['task']} | {r['seed']} | {r['metric']:.5f} | {r['default']} | "
-                     f"{r['prior']} | {diff} |")
+        lines.append(f"| {r['task']} | {r['seed']} | {g(r['metric'])} | {g(r['default'])} | "
+                     f"{g(r['prior'])} | {diff} |")
+    lines.append("")
+    for task in dict.fromkeys(r["task"] for r in results):
+        d = [r["metric"] - r["default"] for r in results
+             if r["task"] == task and r["default"] is not None]
+        if not d:
+            continue
+        line = (f"- {task}: explore − default higher on {sum(x > 0 for x in d)} of {len(d)} "
+                f"seeds, equal on {sum(x == 0 for x in d)}, lower on {sum(x < 0 for x in d)}")
+        if len(d) > 1:
+            from scipy import stats
+
+            mean, sd = float(np.mean(d)), float(np.std(d, ddof=1))
+            half = float(stats.t.ppf(0.975, len(d) - 1)) * sd / np.sqrt(len(d))
+            line += f"; mean {mean:+.4g} [{mean - half:+.4g}, {mean + half:+.4g}] (95%, t)"
+        lines.append(line + ".")
     text = "\n".join(lines) + "\n"
     print(text)
     if a.md:
