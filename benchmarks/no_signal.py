@@ -110,6 +110,8 @@ def main(argv: list[str] | None = None) -> None:
     print("\n".join(lines))
     atomic_write_text(a.md, "\n".join(lines) + "\n")
     check = rerun(a.after, *a.rerun) if a.rerun else None
+    if check is None and a.out.exists():  # keep the last rerun's check
+        check = json.loads(a.out.read_text()).get("rerun")
     if check:
         print(f"{check['cell']}: {check['epochs']} epochs rerun under the rule, "
               f"identical to the committed rows: {check['identical']}")
