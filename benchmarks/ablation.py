@@ -22,7 +22,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -30,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from _results import write_result  # noqa: E402
 
 from dbtool.atomic import atomic_write_text  # noqa: E402
+from dbtool.compare.cells import read_cell  # noqa: E402
 from dbtool.compare.labels import method_name, task_title  # noqa: E402
 from dbtool.compare.paired import paired_differences  # noqa: E402
 from dbtool.sim.task_names import NAMES as TASKS  # noqa: E402
@@ -44,7 +44,7 @@ def _cell_rows(folder: Path, method: str, as_method: str, seeds: set[int]) -> li
     ``as_method``."""
     rows = []
     for d in sorted((folder / "cells").glob(f"{method}-*-s*")):
-        rec = json.loads((d / "cell.json").read_text())
+        rec = read_cell(d) or {}
         if rec.get("method") != method or rec.get("status") != "done" or \
                 int(rec["seed"]) not in seeds:
             continue

@@ -35,10 +35,12 @@ CELLS = [HERE / "state" / "compare-standard8" / "cells", HERE / "state" / "compa
 
 
 def _committed(method: str, task: str, seed: int) -> float | None:
+    from dbtool.compare.cells import read_cell
+
     for folder in CELLS:
-        f = folder / f"{method}-{task}-s{seed}" / "cell.json"
-        if f.exists():
-            return float(json.loads(f.read_text())["metric"])
+        rec = read_cell(folder / f"{method}-{task}-s{seed}")
+        if rec is not None:
+            return float(rec["metric"])
     return None
 
 

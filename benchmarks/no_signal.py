@@ -25,6 +25,7 @@ from _results import write_result  # noqa: E402
 
 from dbtool.atomic import atomic_write_text  # noqa: E402
 from dbtool.codesign.config import SIGNAL  # noqa: E402
+from dbtool.compare.cells import read_cell  # noqa: E402
 
 HERE = Path(__file__).parent
 STATE = HERE / "state"
@@ -35,7 +36,7 @@ def _rows(cell: Path) -> list[dict]:
 
 
 def _metric(cell: Path) -> float:
-    return float(json.loads((cell / "cell.json").read_text())["metric"])
+    return float(read_cell(cell)["metric"])
 
 
 def changed(cell: Path, signal: float = SIGNAL) -> bool:
