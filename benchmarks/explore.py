@@ -114,6 +114,14 @@ def main(argv: list[str] | None = None) -> None:
             half = float(stats.t.ppf(0.975, len(d) - 1)) * sd / np.sqrt(len(d))
             line += f"; mean {mean:+.4g} [{mean - half:+.4g}, {mean + half:+.4g}] (95%, t)"
         lines.append(line + ".")
+    d = [r["metric"] - r["default"] for r in results if r["default"] is not None]
+    up, down = sum(x > 0 for x in d), sum(x < 0 for x in d)
+    if up + down:
+        from scipy import stats
+
+        p = stats.binomtest(up, up + down).pvalue
+        lines.append(f"- all cells: higher on {up} of {len(d)}, equal on {len(d) - up - down}, "
+                     f"lower on {down}; two-sided sign test over the unequal ones p = {p:.2f}.")
     text = "\n".join(lines) + "\n"
     print(text)
     if a.md:
