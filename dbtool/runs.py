@@ -120,7 +120,7 @@ def _entries(path: Path) -> list[str]:
     return sorted(n for n in os.listdir(path) if n != LOCK_NAME)
 
 
-def check_run_dir(path: str | Path, kind: str, own: bool = True, option: str = "--run-dir"
+def check_run_dir(path: str | Path, kind: str, own: bool = True, option: str = "--out"
                   ) -> Path:
     """Check, without writing anything, that a ``kind`` run may be written to ``path``: a new
     or empty folder, or (``own``) a folder holding a run of the same kind. Anything else (a
@@ -166,7 +166,7 @@ class RunFolder:
     """
 
     def __init__(self, path: str | Path, kind: str, own: bool = True,
-                 option: str = "--run-dir", check: bool = True) -> None:
+                 option: str = "--out", check: bool = True) -> None:
         from dbtool.lock import FolderLock, stale_note
 
         self.path = check_run_dir(path, kind, own, option) if check else Path(path)

@@ -14,12 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
+from dbtool.choices import CONTROLLERS
 from dbtool.errors import InputError
 from dbtool.robotize.actuators import reference_robot
 from dbtool.sim.bodies import SHAPES
 from dbtool.sim.tasks import N_STEPS, SUBSTEPS, Task, get_task
-
-CONTROLLERS = ("prescribed", "none", "design")
 
 
 @dataclass

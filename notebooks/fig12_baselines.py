@@ -6,7 +6,7 @@
 #       extension: .py
 #       format_name: percent
 #       format_version: '1.3'
-#       jupytext_version: 1.19.6
+#       jupytext_version: 1.19.7
 #   kernelspec:
 #     display_name: Python 3
 #     language: python
@@ -58,7 +58,7 @@ if (COMMITTED / "robots.png").is_file():
     display(Image(str(COMMITTED / "robots.png")))
 else:
     display(Markdown(f"*No committed comparison yet: `{COMMITTED / 'robots.png'}` does not "
-                     "exist. Make it with `dbtool compare --budget quick --out "
+                     "exist. Make it with `dbtool compare --preset quick --out "
                      "docs/results/compare-quick`.*"))
 
 # %% [markdown]

@@ -26,7 +26,7 @@
 # Quick mode (`DBTOOL_QUICK=1`, used in CI) runs gripping with one seed on the `smoke` budget
 # (fig12_baselines runs crawling); unset, all six tasks with two seeds, still on `smoke` (the
 # `quick` budget's full-length episodes take hours for the whole table: `dbtool compare
-# --budget quick`).
+# --preset quick`).
 
 # %%
 import csv

@@ -191,7 +191,7 @@ def view(path, host=None):
 
 
 def resume(compare=None, cell=None, metrics=None):
-    return lambda tmp: ["compare", "--budget", "smoke", "--resume", "--out",
+    return lambda tmp: ["compare", "--preset", "smoke", "--resume", "--out",
                         str(_comparison(tmp, compare, cell, metrics))]
 
 

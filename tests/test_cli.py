@@ -1,5 +1,6 @@
 """The command line, run as a user would (a subprocess of the installed entry point)."""
 
+import os
 import subprocess
 import sys
 
@@ -51,10 +52,10 @@ def test_bad_input_is_one_line_and_nonzero(tmp_path):
     robot.occupancy[:] = 0.0
     Design("crawling", robot, task.controller()).save(tmp_path / "empty.npz")
     cases = [
-        (("simulate", "walking"), "unknown task"),
+        (("simulate", "walking"), "is not one of"),
         (("simulate", "crawling", "--design", str(tmp_path / "none.npz")), "not found"),
         (("simulate", "crawling", "--design", str(bad)), "not a design file"),
-        (("simulate", "crawling", "--shape", "blob"), "unknown shape"),
+        (("simulate", "crawling", "--shape", "blob"), "is not one of"),
         (("simulate", "crawling", "--design", str(tmp_path / "empty.npz")), "empty"),
     ]
     for args, message in cases:
@@ -91,7 +92,7 @@ def test_design_then_export(tmp_path):
 
 def test_particle_baseline_still_designs(tmp_path):
     out = _run("design", "crawling", "--method", "particle", "--iterations", "1", "--steps",
-               "4", "--run-dir", str(tmp_path / "r"))
+               "4", "--out", str(tmp_path / "r"))
     assert out.returncode == 0, out.stderr
     assert Design.load(tmp_path / "r" / "design.npz").meta["method"] == "particle-baseline"
 
@@ -125,3 +126,40 @@ def test_export_bad_input(tmp_path):
     assert out.returncode != 0 and out.stderr.startswith("error:"), out.stderr
     assert "Traceback" not in out.stderr
     assert (tmp_path / "afile").read_text() == "x"
+
+
+def test_version_short_help_and_choices_in_help():
+    from dbtool import __version__
+
+    out = run_cli("--version")
+    assert out.returncode == 0 and out.stdout.strip() == f"dbtool {__version__}"
+    out = subprocess.run([sys.executable, "-m", "dbtool.cli", "simulate", "-h"],
+                         capture_output=True, text=True, timeout=600,
+                         env={**os.environ, "COLUMNS": "200"})  # a choice list on one line
+    assert out.returncode == 0
+    for words in ("balancing|landing|crawling|hurdling|gripping|box", "prescribed|none|design",
+                  "auto|cpu|cuda"):
+        assert words in out.stdout, out.stdout
+    view = run_cli("view", "--help").stdout
+    assert "dbtool[viewer]" in " ".join(view.split()).replace("│ ", "").replace(" │", "")
+
+
+def test_old_spellings_still_work_and_warn(tmp_path):
+    """Scripts written for the old option names keep working: each old spelling warns once
+    and does what it did."""
+    cases = [
+        (("design", "crawling", "--resume", "nowhere"),
+         "--resume DIR is deprecated; use --out DIR --resume", "nowhere"),
+        (("design", "crawling", "--run-dir", "a", "--out", "b"),
+         "--run-dir is deprecated", "give --out or its old spelling --run-dir, not both"),
+        (("compare", "--budget", "smoke", "--tasks", "walking", "--out", "new"),
+         "--budget is deprecated; use --preset", "unknown task 'walking'"),
+        (("generate", "", "--steps", "8"), "--steps is deprecated; use --sample-steps",
+         "prompt is empty"),
+    ]
+    for args, warning, error in cases:
+        out = run_cli(*args, cwd=tmp_path)
+        assert out.returncode == 2, (args, out.stderr)
+        assert f"warning: {warning}" in out.stderr and error in out.stderr, (args, out.stderr)
+        assert "Traceback" not in out.stderr
+    assert list(tmp_path.iterdir()) == []

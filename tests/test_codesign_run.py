@@ -279,7 +279,7 @@ def test_design_run_resumes_to_the_same_result_and_writes_whole_files(prior, tmp
         DesignRun(tmp_path / "a", _settings(), prior).start("cpu")
     # and resuming it under another task is refused
     before = (tmp_path / "a" / "checkpoint.pt").read_bytes()
-    out = _cli("design", "crawling", "--resume", str(tmp_path / "a"), cwd=tmp_path)
+    out = _cli("design", "crawling", "--out", str(tmp_path / "a"), "--resume", cwd=tmp_path)
     assert out.returncode != 0 and "is a gripping run, not crawling" in out.stderr
     assert (tmp_path / "a" / "checkpoint.pt").read_bytes() == before
 
@@ -307,11 +307,11 @@ def test_design_cli_bad_input_fails_cleanly(tmp_path):
     (tmp_path / "run" / "config.json").write_text("{}")
     (tmp_path / "run" / "checkpoint.pt").write_bytes(b"not a checkpoint")
     before = (tmp_path / "run" / "checkpoint.pt").read_bytes()
-    cases = [(("design", "walking"), "unknown task"),
-             (("design", "crawling", "--preset", "fast"), "unknown preset"),
+    cases = [(("design", "walking"), "is not one of"),
+             (("design", "crawling", "--preset", "fast"), "is not one of"),
              (("design", "crawling", "--resume", str(tmp_path / "nowhere")), "not a dbtool run"),
              (("design", "crawling", "--resume", str(tmp_path / "run")), "corrupt checkpoint"),
-             (("design", "crawling", "--method", "magic"), "unknown method")]
+             (("design", "crawling", "--method", "magic"), "is not one of")]
     for args, msg in cases:
         out = run_cli(*args, cwd=tmp_path)
         assert out.returncode != 0, args

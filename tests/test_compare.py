@@ -40,9 +40,9 @@ from dbtool.sim.tasks import TASKS, get_task
 CLI = [sys.executable, "-c", "from dbtool.cli import main; main()", "compare"]
 NO_RAY = [sys.executable, "-c", "import sys; sys.modules['ray'] = None; "
           "from dbtool.cli import main; main()", "compare"]
-SMOKE = ["--budget", "smoke", "--seeds", "0"]
+SMOKE = ["--preset", "smoke", "--seed", "0"]
 TASK = "gripping"
-ALL = ["--tasks", TASK, "--methods", "all"]  # as a user types it
+ALL = ["--task", TASK, "--method", "all"]  # as a user types it
 # what must not depend on where a cell ran (wall_s, worker and commit may)
 SAME = ("method", "task", "seed", "status", "metric", "budget_units", "budget_used",
         "forward_episodes", "gradient_episodes", "error")
@@ -139,7 +139,7 @@ def test_ray_executor_gives_the_serial_numbers(serial_run, tmp_path):
     test runs the gradient baseline, so each kind of method runs outside the caller."""
     out = tmp_path / "ray"
     methods = ("prior",)
-    res = _compare(*SMOKE, "--tasks", TASK, "--methods", *methods, "--executor", "ray",
+    res = _compare(*SMOKE, "--task", TASK, "--method", *methods, "--executor", "ray",
                    "--workers", "2", "--out", str(out))
     assert res.returncode == 0, res.stderr[-3000:]
     assert "1 cells, 0 finished, 1 to run on ray" in res.stdout
@@ -158,7 +158,7 @@ def test_ray_executor_gives_the_serial_numbers(serial_run, tmp_path):
 def test_local_executor_gives_the_serial_numbers(serial_run, tmp_path):
     """The gradient baseline in a worker process (the Ray test runs the prior)."""
     out = tmp_path / "local"
-    res = _compare(*SMOKE, "--tasks", TASK, "--methods", "particle", "--executor", "local",
+    res = _compare(*SMOKE, "--task", TASK, "--method", "particle", "--executor", "local",
                    "--workers", "2", "--out", str(out))
     assert res.returncode == 0, res.stderr[-3000:]
     rows = _rows(out)
@@ -183,8 +183,8 @@ def test_a_method_that_does_not_read_the_seed_runs_once_per_task(serial_run, tmp
         same = all(torch.equal(p, q) for p, q in zip(a.parameters(), b.parameters(), strict=True))
         assert same == (not seeded(m)), m
     out = tmp_path / "seeds"  # seeds 1 and 2 without 0: the run of seed 1 is the one copied
-    res = _compare("--budget", "smoke", "--tasks", TASK, "--methods", "particle",
-                   "--seeds", "1", "2", "--out", str(out))
+    res = _compare("--preset", "smoke", "--task", TASK, "--method", "particle",
+                   "--seed", "1", "2", "--out", str(out))
     assert res.returncode == 0, res.stderr[-3000:]
     assert "2 cells, 0 finished, 1 to run on serial, 1 to copy" in res.stdout
     rows = _rows(out)
@@ -223,8 +223,8 @@ def test_local_workers_exit_when_the_comparison_is_killed(tmp_path):
     """A SIGKILLed ``dbtool compare`` cannot shut its pool down: its local workers notice the
     parent is gone and exit instead of computing cells nobody collects."""
     out = tmp_path / "orphans"
-    proc = subprocess.Popen([*CLI, *SMOKE, "--tasks", TASK, "--methods", "particle",
-                             "--methods", "prior", "--executor", "local", "--workers", "2",
+    proc = subprocess.Popen([*CLI, *SMOKE, "--task", TASK, "--method", "particle",
+                             "--method", "prior", "--executor", "local", "--workers", "2",
                              "--out", str(out)], stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, env=ENV)
     try:
@@ -246,7 +246,7 @@ def test_local_workers_exit_when_the_comparison_is_killed(tmp_path):
 def test_resume_after_a_kill_skips_the_finished_cell(serial_run, tmp_path):
     out = tmp_path / "killed"
     methods = ("particle", "prior")
-    args = [*SMOKE, "--tasks", TASK, *(a for m in methods for a in ("--methods", m)),
+    args = [*SMOKE, "--task", TASK, *(a for m in methods for a in ("--method", m)),
             "--executor", "serial", "--out", str(out)]
     first = _cell(out, "particle", TASK) / "cell.json"
     proc = subprocess.Popen([*CLI, *args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
@@ -265,7 +265,7 @@ def test_resume_after_a_kill_skips_the_finished_cell(serial_run, tmp_path):
     wall = json.loads(before[1])["wall_s"]
 
     # a resume that names cells runs only those: particle is finished, prior was not asked for
-    res = _compare("--resume", "--out", str(out), "--executor", "serial", "--methods",
+    res = _compare("--resume", "--out", str(out), "--executor", "serial", "--method",
                    "particle")
     assert res.returncode == 0, res.stderr[-3000:]
     assert "2 cells, 1 finished, 0 to run on serial (budget smoke)" in res.stdout
@@ -298,24 +298,30 @@ def _with_file(folder: Path) -> None:
     (folder / "notes.txt").write_text("not a comparison\n")
 
 
-ONE = ["--budget", "smoke", "--tasks", TASK, "--methods", "particle"]
+ONE = ["--preset", "smoke", "--task", TASK, "--method", "particle"]
 BAD = {
-    "unknown method": (["--budget", "smoke", "--methods", "nosuch", "--out", "new"], None,
-                       "unknown method 'nosuch'; choose from particle, voxel, implicit, cppn, "
-                       "prior, diffusebot, embedding, codesign, diffusebot-paper or all"),
-    "unknown task": (["--budget", "smoke", "--tasks", "walking", "--out", "new"], None,
-                     "unknown task 'walking'"),
-    "unknown budget": (["--budget", "huge", "--out", "new"], None,
-                       "unknown budget 'huge'; choose one of smoke, quick, standard, paper"),
+    "unknown method": (["--preset", "smoke", "--method", "nosuch", "--out", "new"], None,
+                       "'nosuch' is not one of 'particle', 'voxel', 'implicit', 'cppn', "
+                       "'prior', 'diffusebot', 'embedding', 'codesign', 'diffusebot-paper', "
+                       "'all'"),
+    "unknown method, old spelling": (["--budget", "smoke", "--methods", "nosuch", "--out",
+                                      "new"], None,
+                                     "unknown method 'nosuch'; choose from particle, voxel, "
+                                     "implicit, cppn, prior, diffusebot, embedding, codesign, "
+                                     "diffusebot-paper or all"),
+    "unknown task": (["--preset", "smoke", "--task", "walking", "--out", "new"], None,
+                     "'walking' is not one of 'balancing'"),
+    "unknown budget": (["--preset", "huge", "--out", "new"], None,
+                       "'huge' is not one of 'smoke', 'quick', 'standard', 'paper'"),
     "unknown executor": ([*ONE, "--executor", "nope", "--out", "new"], None,
-                         "unknown executor 'nope'; choose one of serial, local, ray"),
+                         "'nope' is not one of 'serial', 'local', 'ray'"),
     "resume without out": ([*ONE, "--resume"], None, "--resume needs --out"),
     "resume a missing folder": ([*ONE, "--resume", "--out", "new"], None,
                                 "nothing to resume"),
     "resume a folder that is no comparison": ([*ONE, "--resume", "--out", "other"], _with_file,
                                               "is not a comparison folder"),
-    "resume on another budget": (["--budget", "quick", "--resume", "--out", "other"],
-                                 _fake_comparison, "was run with --budget smoke --threads 1"),
+    "resume on another budget": (["--preset", "quick", "--resume", "--out", "other"],
+                                 _fake_comparison, "was run with --preset smoke --threads 1"),
     "new comparison in a non-empty folder": ([*ONE, "--out", "other"], _with_file,
                                              "already exists and is not empty"),
     "unreachable ray": ([*ONE, "--executor", "ray", "--address", "127.0.0.1:1", "--out", "new"],
@@ -348,14 +354,14 @@ def test_bad_input_is_one_error_line_and_touches_nothing(case, tmp_path):
 def test_space_separated_lists_reach_every_value(tmp_path):
     """``--tasks a b`` works like ``--tasks a --tasks b``: the second value is read (and here
     refused by name), not dropped or taken for an argument."""
-    res = _compare("--tasks", TASK, "nosuchtask", "--seeds", "0", "1", "--out", "new",
+    res = _compare("--task", TASK, "nosuchtask", "--seed", "0", "1", "--out", "new",
                    cwd=tmp_path, timeout=120)
-    assert res.returncode == 2 and "unknown task 'nosuchtask'" in res.stderr, res.stderr
+    assert res.returncode == 2 and "'nosuchtask' is not one of" in res.stderr, res.stderr
     assert list(tmp_path.iterdir()) == []
-    assert expand_list_options(["compare", "--methods", "prior", "diffusebot", "--seeds", "0",
-                                "1", "--budget", "smoke", "--out", "d"]) == [
-        "compare", "--methods", "prior", "--methods", "diffusebot", "--seeds", "0", "--seeds",
-        "1", "--budget", "smoke", "--out", "d"]
+    assert expand_list_options(["compare", "--method", "prior", "diffusebot", "--seed", "0",
+                                "1", "--preset", "smoke", "--out", "d"]) == [
+        "compare", "--method", "prior", "--method", "diffusebot", "--seed", "0", "--seed",
+        "1", "--preset", "smoke", "--out", "d"]
     assert expand_list_options(["design", "gripping"]) == ["design", "gripping"]
 
 

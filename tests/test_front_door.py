@@ -16,6 +16,17 @@ ROOT = Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("word_counts", ROOT / "docs" / "word_counts.py")
 counts = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(counts)
+_spec = importlib.util.spec_from_file_location("cli_reference", ROOT / "docs" / "cli_reference.py")
+cli_reference = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(cli_reference)
+
+
+def test_the_cli_reference_is_what_the_command_prints():
+    """docs/cli.md is generated from the typer app (``python docs/cli_reference.py``)."""
+    assert cli_reference.main(["--check"]) == 0, "run python docs/cli_reference.py"
+    text = cli_reference.render()
+    assert "## dbtool design" in text and "## dbtool prior train" in text
+    assert "--run-dir" not in text.split("## dbtool compare")[1]  # hidden aliases stay hidden
 
 
 def test_the_readme_keeps_the_front_doors_limits():

@@ -69,7 +69,8 @@ def _generate(*args, cwd=None):
 
 
 def test_generate_writes_clouds_npz_and_grid(tmp_path):
-    out = _generate("a star", "-n", "2", "--steps", "8", "--upsample", "-o", str(tmp_path / "g"))
+    out = _generate("a star", "-n", "2", "--sample-steps", "8", "--upsample", "-o",
+                    str(tmp_path / "g"))
     assert out.returncode == 0, out.stderr
     g = tmp_path / "g"
     for name in ("a-star-0.ply", "a-star-1.ply", "samples.npz", "grid.png", "generate.json"):
@@ -165,7 +166,7 @@ def test_generate_with_another_version_notes_that_versions_captions(tmp_path):
 
     near = nearest_captions("a teapot with a long spout", 1, version=2)[0][0]
     assert near not in {c for c, _ in nearest_captions("a teapot with a long spout", 50)}
-    out = _generate("a teapot with a long spout", "--prior", "2", "-n", "1", "--steps", "4",
+    out = _generate("a teapot with a long spout", "--prior", "2", "-n", "1", "--sample-steps", "4",
                     "--upsample", "-o", str(tmp_path / "g"))
     assert out.returncode == 0, out.stderr
     assert repr(near) in out.stderr

@@ -67,9 +67,9 @@ def test_a_refinement_that_finds_nothing_hands_over_the_start(start):
 
 def test_the_ablation_methods_spend_the_budget(tmp_path):
     out = tmp_path / "c"
-    res = subprocess.run([sys.executable, "-m", "dbtool.cli", "compare", "--budget", "smoke",
-                          "--tasks", "crawling", "--methods", "embedding", "--methods", "codesign",
-                          "--methods", "diffusebot-paper", "--out", str(out)],
+    res = subprocess.run([sys.executable, "-m", "dbtool.cli", "compare", "--preset", "smoke",
+                          "--task", "crawling", "--method", "embedding", "--method", "codesign",
+                          "--method", "diffusebot-paper", "--out", str(out)],
                          capture_output=True, text=True, timeout=900)
     assert res.returncode == 0, res.stderr[-2000:]
     rows = {r["method"]: r for r in csv.DictReader((out / "results.csv").open())}

@@ -55,10 +55,10 @@ def test_robotize_bad_input_is_one_line_and_writes_nothing(tmp_path):
         ((str(tmp_path / "nan.ply"),), "NaN"),
         ((str(tmp_path / "same.ply"),), "identical"),
         ((str(tmp_path / "mm.ply"),), "far outside"),
-        ((ok, "--task", "walking"), "unknown task"),
-        ((ok, "--method", "voxels"), "unknown robotizing method"),
+        ((ok, "--task", "walking"), "is not one of"),
+        ((ok, "--method", "voxels"), "is not one of"),
         ((ok, "--t", "5000"), "--t must be"),
-        ((ok, "--stiffness", "bone"), "unknown stiffness"),
+        ((ok, "--stiffness", "bone"), "is not one of"),
         ((ok, "-o", str(tmp_path / "robot.txt")), ".npz"),
     ]
     for args, message in cases:

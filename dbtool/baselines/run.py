@@ -11,11 +11,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from dbtool.baselines.features import DEFAULT_BODY
+from dbtool.choices import DESIGN_METHODS
 from dbtool.errors import InputError
 from dbtool.robotize.actuators import reference_robot
 from dbtool.sim.tasks import N_STEPS, get_task
-
-DESIGN_METHODS = ("diffusebot", "particle")  # what `dbtool design --method` accepts
 
 
 def check_method(method: str) -> str:
@@ -82,7 +81,7 @@ def particle_run(cfg: ParticleRunConfig, out: str | Path | None = None,
     runtime.init(arch=cfg.arch)
     seed_everything(cfg.seed)
     run = RunDir(out or default_run_dir("design", task.name), cfg.resolved(), cfg.seed,
-                 runtime.device(), kind="design", option="--run-dir", own=False)
+                 runtime.device(), kind="design", option="--out", own=False)
     with run:
         def log(k: int, metric: float, _design) -> None:
             run.log(iteration=k, metric=metric)

@@ -6,7 +6,9 @@ from pathlib import Path
 
 import typer
 
-from dbtool.cli.common import OneLineErrors, ProgressBar, guarded
+from dbtool.choices import PRIOR_VERSION
+from dbtool.cli.choices import Arch, Controller, Reconstruction, Shape, Stiffness, Task, deprecated
+from dbtool.cli.common import HELP, OneLineErrors, ProgressBar, guarded
 from dbtool.cli.compare import compare_command
 from dbtool.cli.design import design_command
 from dbtool.cli.export import export_command
@@ -15,10 +17,24 @@ from dbtool.cli.realgap import realgap_app
 from dbtool.inputs import MAX_SEED, MAX_STEPS
 from dbtool.sim.task_names import NAMES
 
-app = typer.Typer(cls=OneLineErrors, add_completion=False, no_args_is_help=True,
-                  help="dbtool: breed soft robots with a diffusion prior and a differentiable "
-                       "MPM simulator (DiffuseBot).")
+app = typer.Typer(cls=OneLineErrors, add_completion=False, no_args_is_help=True, **HELP)
 TASK_NAMES = ", ".join(NAMES)
+
+
+def _version(show: bool) -> None:
+    if show:
+        from dbtool import __version__
+
+        typer.echo(f"dbtool {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def root(version: bool = typer.Option(False, "--version", "-V", is_eager=True,
+                                      callback=_version, help="Print the version and exit.")
+         ) -> None:
+    """dbtool: breed soft robots with a diffusion prior and a differentiable MPM simulator
+    (DiffuseBot). Run `dbtool COMMAND -h` for a command's options (docs/cli.md)."""
 app.add_typer(prior_app, name="prior")
 app.add_typer(realgap_app, name="realgap")
 app.command("compare")(compare_command)
@@ -42,23 +58,25 @@ def tasks() -> None:
 
 @app.command()
 def simulate(
-    task: str = typer.Argument(..., help=TASK_NAMES),
-    shape: str = typer.Option("box", help="reference body: box, sphere, ellipsoid, cylinder, "
-                                          "star, table, finger"),
+    task: Task = typer.Argument(..., help="the task"),
+    shape: Shape = typer.Option("box", help="reference body"),
     design: Path = typer.Option(None, help="a saved design (.npz) instead of a reference body"),
-    controller: str = typer.Option("prescribed", help="prescribed | none | design"),
-    out: Path = typer.Option(None, help="run directory (default runs/simulate-TASK-TIME)"),
+    controller: Controller = typer.Option("prescribed", help="the task's prescribed controller, "
+                                          "none (no actuation) or the design's own"),
+    out: Path = typer.Option(None, "-o", "--out",
+                             help="run directory (default runs/simulate-TASK-TIME)"),
     steps: int = typer.Option(100, min=1, max=MAX_STEPS,
                               help="control steps (the paper uses 100)"),
     seed: int = typer.Option(0, min=0, max=MAX_SEED, help="seed for numpy, torch and Python"),
-    arch: str = typer.Option("cpu", help="cpu | cuda | auto"),
+    arch: Arch = typer.Option("cpu", help="Taichi back end (auto: a GPU when there is one)"),
     gif: bool = typer.Option(True, help="also write an animated GIF"),
 ) -> None:
     """Simulate one body on a task; print the metric, write a montage PNG and a GIF."""
     from dbtool.simulate_run import SimulateConfig, simulate_run
 
     with guarded():
-        cfg = SimulateConfig(task, shape, design, controller, steps, seed, arch, gif)
+        cfg = SimulateConfig(task.value, shape.value, design, controller.value, steps, seed,
+                             arch.value, gif)
         with ProgressBar(steps, cfg.task, "step") as bar:
             res = simulate_run(cfg, out, progress=bar.update)
     typer.echo(f"{res.task.name}: metric = {res.metric:.6f}  ({res.task.metric_text})")
@@ -118,25 +136,26 @@ def report_command(
 @app.command()
 def robotize(
     cloud: Path = typer.Argument(..., help="surface point cloud (.ply, prior frame, y up)"),
-    task: str = typer.Option("crawling", help=TASK_NAMES),
+    task: Task = typer.Option("crawling", help="the task the robot is made for"),
     out: Path = typer.Option(Path("robot.npz"), "-o", "--out", help="design file (.npz); a "
                                                                    "PNG is written next to it"),
-    method: str = typer.Option("dpsr", help="dpsr (Psi) or direct_sdf (Figure 8 baseline)"),
+    method: Reconstruction = typer.Option("dpsr", help="dpsr (differentiable Poisson) or "
+                                          "direct_sdf (the Figure 8 baseline)"),
     t: int = typer.Option(None, help="the cloud is a diffusion sample x_t at this step"),
     noise: float = typer.Option(None, help="std of the noise in the cloud (prior frame)"),
     res: int = typer.Option(128, min=16, max=256, help="DPSR grid resolution"),
-    stiffness: str = typer.Option("constant", help="constant | depth"),
+    stiffness: Stiffness = typer.Option("constant", help="uniform, or stiffer inside"),
 ) -> None:
     """Turn a point cloud into a simulatable robot (solid, actuators, stiffness)."""
     from dbtool.robotize.cloud_file import robotize_cloud_file
     from dbtool.robotize.robotizer import RobotizeConfig
 
     with guarded():
-        cfg = RobotizeConfig(res=res, stiffness=stiffness)
-        done = robotize_cloud_file(cloud, task, out, method, noise, t, cfg)
+        cfg = RobotizeConfig(res=res, stiffness=stiffness.value)
+        done = robotize_cloud_file(cloud, task.value, out, method.value, noise, t, cfg)
     r = done.design.robot
     typer.echo(f"{done.design.task}: {int(r.active().sum())} active particles of {r.n}, "
-               f"{r.actuators.shape[1]} actuator groups, method {method}")
+               f"{r.actuators.shape[1]} actuator groups, method {method.value}")
     typer.echo(f"design:  {done.path}")
     typer.echo(f"picture: {done.picture}")
 
@@ -146,15 +165,18 @@ def generate(
     prompts: list[str] = typer.Argument(..., help="one or more text prompts, e.g. \"a star\""),
     n: int = typer.Option(8, "-n", min=1, max=10_000, help="samples per prompt"),
     guidance: float = typer.Option(3.0, help="classifier-free guidance scale (Point-E uses 3)"),
-    steps: int = typer.Option(64, min=1, max=1024,
-                              help="sampling steps (strided over the 1,024)"),
+    sample_steps: int = typer.Option(None, "--sample-steps", min=1, max=1024,
+                                     help="denoising steps, strided over the 1,024 [default: "
+                                          "64]"),
+    steps: int = typer.Option(None, min=1, max=1024, hidden=True,
+                              help="old spelling of --sample-steps"),
     eta: float = typer.Option(1.0, min=0.0, max=1.0, help="1: strided DDPM, 0: DDIM"),
     seed: int = typer.Option(0, min=0, max=MAX_SEED, help="seed of the initial noise"),
     upsample: bool = typer.Option(False, "--upsample", help="densify to 4,096 points"),
     base: Path = typer.Option(None, help="base model weights (default: the shipped ones)"),
     upsampler: Path = typer.Option(None, help="upsampler weights (default: the shipped ones)"),
     version: int = typer.Option(None, "--prior", min=1, help="shipped prior version "
-                                "(default: the default, docs/prior.md)"),
+                                f"(default: {PRIOR_VERSION}, docs/prior.md)"),
     out: Path = typer.Option(None, "-o", "--out", help="output folder (default "
                                                       "runs/generate-TIME)"),
 ) -> None:
@@ -164,9 +186,10 @@ def generate(
     from dbtool.prior.sampling.pipeline import Prior
     from dbtool.runs import check_run_dir, default_run_dir
 
-    settings = GenerateSettings(n, guidance, steps, seed, upsample, eta)
     out = out or default_run_dir("generate")
     with guarded():
+        steps = deprecated("--steps", "--sample-steps", steps, sample_steps) or 64
+        settings = GenerateSettings(n, guidance, steps, seed, upsample, eta)
         check_prompts(prompts)
         check_run_dir(out, "generate", option="--out")
         prior = Prior.load(base, upsampler if upsample else None, with_upsampler=upsample,
@@ -180,12 +203,7 @@ def generate(
 
 
 def main() -> None:
-    """The ``dbtool`` console command; ``compare`` also takes space-separated lists."""
-    import sys
-
-    from dbtool.cli.compare import expand_list_options
-
-    sys.argv[1:] = expand_list_options(sys.argv[1:])
+    """The ``dbtool`` console command (old spellings: :func:`~dbtool.cli.common.old_spellings`)."""
     app()
 
 

@@ -19,6 +19,9 @@ except ImportError:  # pragma: no cover - an older typer on click
 
 from dbtool.errors import DbtoolError
 
+# every command group: help as markdown (paragraphs reflow, `[extra]` stays literal), -h
+HELP = {"rich_markup_mode": "markdown", "context_settings": {"help_option_names": ["-h", "--help"]}}
+
 
 def fail(message: str) -> None:
     """Print ``error: message`` on stderr and exit with code 2."""
@@ -49,6 +52,60 @@ def command_line(fallback: str = "dbtool") -> str:
     return fallback
 
 
+LIST_OPTIONS = ("--task", "--method", "--seed", "--tasks", "--methods", "--seeds")
+
+
+def expand_list_options(argv: list[str]) -> list[str]:
+    """``compare --task a b --seed 0 1`` as typer reads it: ``--task a --task b ...``
+    (an option of typer takes one value per flag).
+
+    >>> expand_list_options(["compare", "--seed", "0", "1", "--out", "x"])
+    ['compare', '--seed', '0', '--seed', '1', '--out', 'x']
+    """
+    if not argv or argv[0] != "compare":
+        return list(argv)
+    out: list[str] = []
+    owner = None
+    for tok in argv:
+        if tok.startswith("-"):
+            owner = tok if tok in LIST_OPTIONS else None
+            out.append(tok)
+            continue
+        if owner is not None and out[-1] != owner:
+            out.append(owner)  # a further value of the list option before it
+        out.append(tok)
+    return out
+
+
+def old_spellings(argv: list[str]) -> list[str]:
+    """``argv`` as the parser reads it: ``compare``'s space-separated lists become one flag
+    per value, and ``design TASK --resume DIR`` (the old spelling) becomes ``--out DIR
+    --resume`` with a deprecation warning."""
+    from dbtool.sim.task_names import NAMES
+
+    argv = expand_list_options(argv)
+    if not argv or argv[0] != "design":
+        return argv
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        tok = argv[i]
+        if tok.startswith("--resume="):
+            tok, nxt = "--resume", tok.split("=", 1)[1]
+            argv = [*argv[:i], tok, nxt, *argv[i + 1:]]
+        nxt = argv[i + 1] if i + 1 < len(argv) else None
+        if tok == "--resume" and nxt is not None and not nxt.startswith("-") \
+                and nxt not in NAMES:
+            typer.secho("warning: --resume DIR is deprecated; use --out DIR --resume",
+                        err=True, fg=typer.colors.YELLOW)
+            out += ["--out", nxt, "--resume"]
+            i += 2
+            continue
+        out.append(tok)
+        i += 1
+    return out
+
+
 class OneLineErrors(TyperGroup):
     """The ``dbtool`` command group: a usage error (an unknown option, a value out of its
     range, a missing argument) is one ``error:`` line naming the command's ``--help``, and
@@ -56,6 +113,7 @@ class OneLineErrors(TyperGroup):
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True,
              **extra):
+        args = old_spellings(list(sys.argv[1:] if args is None else args))
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         try:
@@ -66,7 +124,7 @@ class OneLineErrors(TyperGroup):
             sys.exit(0)
         except _click_errors.UsageError as exc:
             where = exc.ctx.command_path if exc.ctx is not None else "dbtool"
-            message = " ".join(exc.format_message().split())
+            message = " ".join(exc.format_message().replace("Value error, ", "").split())
             typer.secho(f"error: {message} (see '{where} --help')", err=True,
                         fg=typer.colors.RED)
             sys.exit(2)

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import typer
 
+from dbtool.choices import PRIOR_VERSION
+from dbtool.cli.choices import Arch, DesignMethod, Executor, Preset, Task, deprecated, value
 from dbtool.cli.common import command_line, guarded
 from dbtool.codesign.config import PROMPT_T_MIN
 from dbtool.inputs import MAX_SEED, MAX_STEPS
@@ -16,16 +18,17 @@ TASK_NAMES = ", ".join(NAMES)
 
 
 def design_command(
-    task: str = typer.Argument(..., help=TASK_NAMES),
-    preset: str = typer.Option("quick", help="quick (minutes on a laptop CPU) | paper "
-                                             "(Tables 4-5)"),
+    task: Task = typer.Argument(..., help="the task"),
+    preset: Preset = typer.Option("quick", help="quick (minutes on a laptop CPU) or paper "
+                                                "(Tables 4-5, hours)"),
     prompt: str = typer.Option(None, help="text feedback composed with the optimised "
                                           "embedding, e.g. 'a star' (docs/method.md §6)"),
     prompt_guidance: float = typer.Option(3.0, help="guidance weight of --prompt"),
     prompt_t_min: int = typer.Option(PROMPT_T_MIN, min=0, max=1024,
                                      help="--prompt guides the diffusion steps with t >= this "
                                           "(0: every step)"),
-    start: str = typer.Option(None, help="prompt the embedding starts from (default: null)"),
+    start: str = typer.Option(None, help="prompt the embedding starts from (default: the "
+                                         "uniform mixture over the prior's conditions)"),
     seed: int = typer.Option(0, min=0, max=MAX_SEED, help="seed of the whole run"),
     epochs: int = typer.Option(None, min=0, max=10_000,
                                help="embedding epochs (default: the preset's)"),
@@ -37,20 +40,22 @@ def design_command(
                                     "elite (default: the preset's, 10 quick, 0 paper)"),
     kappa: float = typer.Option(None, min=0, help="physics weight (default: Table 5's)"),
     steps: int = typer.Option(100, min=1, max=MAX_STEPS, help="control steps per episode"),
-    run_dir: Path = typer.Option(None, "--run-dir",
-                                 help="run directory (default runs/design-TASK-TIME)"),
-    resume: Path = typer.Option(None, help="continue the run in this directory"),
-    method: str = typer.Option("diffusebot", help="diffusebot | particle (the baseline)"),
+    out: Path = typer.Option(None, "-o", "--out",
+                             help="run directory (default runs/design-TASK-TIME)"),
+    resume: bool = typer.Option(False, "--resume", help="continue the run in --out"),
+    run_dir: Path = typer.Option(None, "--run-dir", hidden=True, help="old spelling of --out"),
+    method: DesignMethod = typer.Option("diffusebot", help="DiffuseBot or the particle "
+                                        "baseline"),
     iterations: int = typer.Option(4, min=0, max=100_000,
                                    help="particle baseline: gradient steps"),
-    arch: str = typer.Option("cpu", help="cpu | cuda | auto"),
+    arch: Arch = typer.Option("cpu", help="Taichi back end (auto: a GPU when there is one)"),
     report: bool = typer.Option(True, "--report/--no-report",
                                 help="write report.html (docs/viewing.md)"),
     prior: int = typer.Option(None, "--prior", min=1, help="shipped prior version (default: "
-                              "the default, docs/prior.md)"),
-    executor: str = typer.Option("serial", help="where each epoch's designs are scored: "
-                                 "serial, local (worker processes) or ray (docs/cluster.md); "
-                                 "the result does not depend on it"),
+                              f"{PRIOR_VERSION}, docs/prior.md)"),
+    executor: Executor = typer.Option("serial", help="where each epoch's designs are scored: "
+                                      "here, in local worker processes or on Ray "
+                                      "(docs/cluster.md); the result does not depend on it"),
     workers: int = typer.Option(2, min=1, max=4096, help="worker processes (local) or CPUs "
                                 "of a private Ray instance"),
     address: str = typer.Option(None, help="Ray cluster to join: HOST:PORT or auto"),
@@ -69,7 +74,14 @@ def design_command(
     from dbtool.prior.sampling.generate import far_prompt_note
     from dbtool.sim.tasks import get_task
 
+    task, preset, method, arch, executor = value([task, preset, method, arch, executor])
     with guarded():
+        out = deprecated("--run-dir", "--out", run_dir, out)
+        if resume and out is None:
+            from dbtool.errors import InputError
+
+            raise InputError("--resume needs --out, the run directory to continue")
+        run_dir, resume = (None, out) if resume else (out, None)
         if check_method(method) == "particle":
             return particle_design(task, iterations, steps, seed, arch, run_dir, report)
         if executor != "serial" and threads is None:
@@ -96,7 +108,7 @@ def design_command(
             run.close(ok=False)  # a run with no checkpoint leaves nothing behind
             if run.saved_work():
                 typer.echo(f"interrupted; continue with: dbtool design {run.settings.task} "
-                           f"--resume {run.path}", err=True)
+                           f"--out {run.path} --resume", err=True)
             else:
                 typer.echo("interrupted before the first checkpoint: nothing to resume (what it "
                            "wrote was removed); start again with: "

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import typer
 
+from dbtool.cli.choices import Infill
 from dbtool.cli.common import guarded
 from dbtool.export.config import ExportConfig
 
@@ -37,8 +38,9 @@ def export_command(
                                       help="least bend radius of a channel (mm)"),
     min_wall: float = typer.Option(DEFAULT["min_wall"], min=0.0,
                                    help="material kept around a channel (mm)"),
-    infill: str = typer.Option(DEFAULT["infill"],
-                               help="none | voronoi (2.5 mm cells, 0.4 mm beams)"),
+    infill: Infill = typer.Option(DEFAULT["infill"],
+                                  help="solid, or a Voronoi lattice (2.5 mm cells, 0.4 mm "
+                                       "beams)"),
     shell: float = typer.Option(DEFAULT["shell"], min=0.1,
                                 help="solid skin around the infill (mm)"),
     scale_mm: float = typer.Option(DEFAULT["scale_mm"], "--scale-mm", min=1e-3,
@@ -47,7 +49,8 @@ def export_command(
                                 help="write the parts in their print orientation"),
     slice_: bool = typer.Option(DEFAULT["slice"], "--slice/--no-slice",
                                 help="check every part with PrusaSlicer when it is installed"),
-    out: Path = typer.Option(Path("exports"), help="parent folder; writes OUT/<design-name>/"),
+    out: Path = typer.Option(Path("exports"), "-o", "--out",
+                             help="parent folder; writes OUT/<design-name>/"),
     report: bool = typer.Option(True, "--report/--no-report",
                                 help="write report.html (docs/viewing.md)"),
 ) -> None:
@@ -66,7 +69,7 @@ def export_command(
                            channels=channels, tendon_diameter=tendon_diameter,
                            tube_diameter=tube_diameter, clearance=clearance,
                            channel_diameter=channel_diameter, bend_radius=bend_radius,
-                           min_wall=min_wall, infill=infill, shell=shell, orient=orient,
+                           min_wall=min_wall, infill=infill.value, shell=shell, orient=orient,
                            slice=slice_)
         name = design_name(path)
         d = Design.load(path)

@@ -6,10 +6,12 @@ from pathlib import Path
 
 import typer
 
-from dbtool.cli.common import guarded
+from dbtool.cli.choices import PriorModel, deprecated
+from dbtool.cli.common import HELP, guarded
 from dbtool.errors import InputError
 
-prior_app = typer.Typer(no_args_is_help=True, help="Train, export and evaluate the prior.")
+prior_app = typer.Typer(no_args_is_help=True, help="Train, export and evaluate the prior.",
+                        **HELP)
 
 
 def parse_interval(text: str) -> tuple[int, int]:
@@ -25,27 +27,32 @@ def parse_interval(text: str) -> tuple[int, int]:
 
 @prior_app.command("train")
 def prior_train(
-    kind: str = typer.Option("base", help="base (text -> 1,024 points) or upsampler"),
-    steps: int = typer.Option(None, min=1, help="training steps (default: the shipped preset)"),
-    out: Path = typer.Option(None, help="run directory (default runs/prior/KIND)"),
+    kind: PriorModel = typer.Option("base", help="base (text -> 1,024 points) or upsampler"),
+    train_steps: int = typer.Option(None, "--train-steps", min=1,
+                                    help="training steps (default: the shipped preset's)"),
+    out: Path = typer.Option(None, "-o", "--out", help="run directory (default "
+                             "runs/prior/KIND)"),
     resume: bool = typer.Option(False, "--resume", help="continue from OUT/checkpoint.pt"),
     threads: int = typer.Option(None, min=1, help="torch threads (default 1)"),
     seed: int = typer.Option(None, help="seed (default 0)"),
-    corpus: int = typer.Option(None, help="corpus version: 1 (the default), 2 (the attribute "
-                               "corpus) or 3 (the attribute corpus, revised)"),
+    corpus: int = typer.Option(None, min=1, max=3, help="corpus version: 1 (the default), 2 "
+                               "(the attribute corpus) or 3 (the attribute corpus, revised)"),
     compile_: bool = typer.Option(False, "--compile", help="torch.compile the model (needs a C "
                                   "compiler; about 2 min to compile, then faster steps)"),
     init: Path = typer.Option(None, help="fine-tune: start from this checkpoint's weights "
                               "(its model and corpus version; fresh optimiser, 8,000 steps "
-                              "from lr 3e-4 unless --steps, --lr)"),
+                              "from lr 3e-4 unless --train-steps, --lr)"),
     lr: float = typer.Option(None, min=0.0, help="peak learning rate (default: the preset's)"),
+    steps: int = typer.Option(None, min=1, hidden=True, help="old spelling of --train-steps"),
 ) -> None:
     """Train a model of the prior on the procedural corpus; checkpoints and resumes."""
     from dbtool.prior.training.train import finetune_config, preset, resumed_config, train
     from dbtool.runs import RUNS
 
+    kind = kind.value
     out = out or RUNS / "prior" / kind
     with guarded():
+        steps = deprecated("--steps", "--train-steps", steps, train_steps)
         if resume:
             cfg = resumed_config(out, steps)
             if threads:
@@ -77,16 +84,18 @@ def prior_export(
 def prior_evaluate(
     base: Path = typer.Option(None, help="base model weights (default: the shipped ones)"),
     samples: int = typer.Option(16, min=1, help="samples per family"),
-    steps: int = typer.Option(64, min=1, help="DDIM steps"),
+    sample_steps: int = typer.Option(None, "--sample-steps", min=1,
+                                     help="DDIM steps [default: 64]"),
     guidance: float = typer.Option(3.0, help="guidance scale"),
     families: list[str] = typer.Option(None, "--family", help="only these families"),
-    out: Path = typer.Option(Path("runs/prior/eval.json"), help="metrics JSON"),
+    out: Path = typer.Option(Path("runs/prior/eval.json"), "-o", "--out", help="metrics JSON"),
     corpus: int = typer.Option(1, help="the corpus whose families and references are used: "
                                "1, 2 (the attribute corpus) or 3 (revised)"),
     attribute_pairs: int = typer.Option(4, min=1, help="corpus 2, 3: noise draws per low/high "
                                         "attribute prompt pair and per legs prompt"),
     guidance_interval: str = typer.Option(None, help="LO:HI, guidance only at the steps with "
                                           "LO <= t <= HI (default: the weights' own setting)"),
+    steps: int = typer.Option(None, min=1, hidden=True, help="old spelling of --sample-steps"),
 ) -> None:
     """Prompt fidelity (1-NN Chamfer), its ceiling, paraphrases, diversity, interpolation;
     on corpora 2 and 3 also held-out phrasings, attribute control and part counts. Finished pieces
@@ -97,6 +106,7 @@ def prior_evaluate(
     from dbtool.runs import write_json
 
     with guarded():
+        steps = deprecated("--steps", "--sample-steps", steps, sample_steps) or 64
         prior = Prior.load(base, with_upsampler=False)
         if guidance_interval:
             prior.guidance_interval = parse_interval(guidance_interval)
@@ -139,8 +149,10 @@ def prior_evaluate(
 def prior_shared(
     versions: list[int] = typer.Argument(..., help="shipped prior versions, e.g. 1 3"),
     samples: int = typer.Option(16, min=1, help="samples per family"),
-    steps: int = typer.Option(64, min=1, help="sampling steps"),
-    out: Path = typer.Option(Path("runs/prior/shared.json"), help="metrics JSON"),
+    sample_steps: int = typer.Option(None, "--sample-steps", min=1,
+                                     help="denoising steps [default: 64]"),
+    out: Path = typer.Option(Path("runs/prior/shared.json"), "-o", "--out", help="metrics JSON"),
+    steps: int = typer.Option(None, min=1, hidden=True, help="old spelling of --sample-steps"),
 ) -> None:
     """Several prior versions on the families version 1 knows, each sample scored against the
     union of their corpora's references (docs/prior.md). Finished pieces are kept in OUT's
@@ -151,6 +163,7 @@ def prior_shared(
     from dbtool.runs import write_json
 
     with guarded():
+        steps = deprecated("--steps", "--sample-steps", steps, sample_steps) or 64
         priors = {f"version {v}": Prior.load(version=v, with_upsampler=False) for v in versions}
         parts = Parts(out.with_name(out.stem + ".parts.json"), {
             "weights": [weights_digest(p.base) for p in priors.values()], "samples": samples,

@@ -7,10 +7,10 @@ from pathlib import Path
 
 import typer
 
-from dbtool.cli.common import guarded
+from dbtool.cli.common import HELP, guarded
 from dbtool.errors import InputError
 
-realgap_app = typer.Typer(no_args_is_help=True,
+realgap_app = typer.Typer(no_args_is_help=True, **HELP,
                           help="Sim vs real: the gripper's tendon protocol (Figure 16).")
 LOG_HELP = "a tip-distance log (CSV, docs/realgap.md)"
 DESIGN_HELP = "a gripper: run folder, export folder (e.g. exports/gripping-seed0) or design.npz"

@@ -161,8 +161,8 @@ class DesignRun:
         from dbtool.runs import check_run_dir
 
         if (path / CHECKPOINT).exists() or (path / "design.npz").exists():
-            raise RunDirectoryError(f"{path} already holds a run; use --resume or another "
-                                    "--run-dir")
+            raise RunDirectoryError(f"{path} already holds a run; continue it with --resume or "
+                                    "give another --out")
         check_run_dir(path, "design")
 
     def saved_work(self) -> bool:
@@ -258,7 +258,7 @@ class DesignRun:
         from dbtool.runs import RunFolder
 
         # the checkpoint shows the folder is a design run: lock it while the run continues
-        run.folder = RunFolder(path, "design", option="--resume", check=False)
+        run.folder = RunFolder(path, "design", option="--out", check=False)
         return run
 
     # ------------------------------------------------------------------ work

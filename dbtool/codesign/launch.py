@@ -23,7 +23,7 @@ def open_design_run(settings: Settings, run_dir: str | Path | None = None,
 
     if resume is not None:
         if run_dir is not None:
-            raise RunDirectoryError("give --resume DIR or --run-dir DIR, not both")
+            raise RunDirectoryError("give a run to resume or a new run directory, not both")
         runtime.init(arch=arch, threads=threads)
         run = DesignRun.resume(resume, scorer=scorer)
         if run.settings.task != settings.task:

@@ -187,7 +187,7 @@ def summary_legend(axes, methods) -> tuple[list, list[str]]:
 def write_anytime(out_dir: str | Path, dpi: int = 100) -> dict[str, Path]:
     """``anytime.json``, one ``anytime-TASK.png`` per task and the summary ``anytime.png`` (all
     tasks side by side) in ``out_dir``; nothing when no cell has progress rows."""
-    from dbtool.compare.methods import METHODS
+    from dbtool.choices import METHODS
     from dbtool.sim.task_names import NAMES as TASKS
 
     out_dir = Path(out_dir)

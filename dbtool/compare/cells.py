@@ -121,8 +121,8 @@ def read_compare_json(path: str | Path, resume: bool = False) -> dict:
     if "units" in settings:
         number(f"{path}: budget_settings.units", settings["units"], 0)
     if resume:
+        from dbtool.choices import KNOWN
         from dbtool.compare.budget import get_budget
-        from dbtool.compare.methods import KNOWN
         from dbtool.sim.tasks import TASKS
 
         if fmt != FORMAT:

@@ -27,15 +27,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from dbtool.choices import ABLATION, GRADIENT, KNOWN, METHODS  # noqa: F401 (re-exported)
 from dbtool.compare.budget import GRAD_COST, Budget, gradient_iterations
 from dbtool.errors import InputError, RunError
 from dbtool.sim.robot import Robot
 from dbtool.sim.tasks import Task
 
-GRADIENT = ("particle", "voxel", "implicit", "cppn")
-METHODS = (*GRADIENT, "prior", "diffusebot")  # the table of docs/results.md (``--methods all``)
-ABLATION = ("embedding", "codesign", "diffusebot-paper")  # DiffuseBot's parts, on request
-KNOWN = (*METHODS, *ABLATION)
 TITLES = {"particle": "particle", "voxel": "voxel", "implicit": "implicit fn",
           "cppn": "diff-CPPN", "prior": "prior samples", "diffusebot": "DiffuseBot",
           "embedding": "embedding only", "codesign": "co-design only",

@@ -8,8 +8,8 @@ import math
 
 from scipy import stats
 
+from dbtool.choices import METHODS
 from dbtool.compare.labels import method_name, ordered, task_title
-from dbtool.compare.methods import METHODS
 from dbtool.sim.task_names import NAMES as TASKS
 
 LEVEL = 0.95

@@ -113,7 +113,7 @@ def prepare(out: Path, cfg: CompareConfig, resume: bool) -> tuple[dict, RunFolde
         for m, t, s in meta["cells"]:  # every record read later, checked before any write
             check_cell(out / "cells" / f"{m}-{t}-s{s}")
         if meta["budget"] != cfg.budget or meta["threads"] != cfg.threads:
-            raise CompareError(f"{out} was run with --budget {meta['budget']} --threads "
+            raise CompareError(f"{out} was run with --preset {meta['budget']} --threads "
                                f"{meta['threads']}; a resume must use the same")
         meta["cells"] = _order(meta["cells"] + [list(c) for c in cfg.cells()])
         folder = RunFolder(out, "compare", option="--out")

@@ -8,9 +8,9 @@ import json
 from pathlib import Path
 
 from dbtool.atomic import atomic_write
+from dbtool.choices import METHODS
 from dbtool.compare.budget import GRAD_COST
 from dbtool.compare.labels import method_name
-from dbtool.compare.methods import METHODS
 from dbtool.compare.report import TASKS, cell_dir
 
 

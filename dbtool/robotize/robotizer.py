@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from dbtool.choices import RECONSTRUCTIONS
 from dbtool.errors import InputError
 from dbtool.robotize import normals as N
 from dbtool.robotize.actuators import cluster_actuators
@@ -57,7 +58,6 @@ from dbtool.sim.tasks.base import SPACING
 MIN_POINTS = 50
 FAR = 1.0  # a cloud whose median |x| (max-norm) exceeds this is not in the prior's frame
 MIN_PARTICLES = 100  # minimum-volume guard on the kept component
-RECONSTRUCTIONS = ("dpsr", "direct_sdf")
 
 
 class RobotizeError(InputError):

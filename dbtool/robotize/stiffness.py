@@ -20,10 +20,11 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from dbtool.choices import STIFFNESS
 from dbtool.errors import InputError
 from dbtool.sim.robot import DEFAULT_STIFFNESS
 
-MODES = ("constant", "depth")
+MODES = STIFFNESS
 E_SKIN, E_CORE = DEFAULT_STIFFNESS / 2, 2 * DEFAULT_STIFFNESS
 DEPTH_CELLS = 4.0
 

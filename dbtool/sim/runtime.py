@@ -6,11 +6,11 @@ import os
 
 import taichi as ti
 
+from dbtool.choices import ARCHS
 from dbtool.errors import InputError
 
 _STATE: dict[str, object] = {}
 
-ARCHS = ("auto", "cpu", "cuda")
 CPU_ARCHS = (ti.x64, ti.arm64)  # Taichi's CPU backends: per-thread grid copies, no atomics
 PRECISIONS = ("f32", "f64")
 

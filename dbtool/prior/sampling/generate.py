@@ -60,7 +60,7 @@ def generate(prior: Prior, prompts: list[str], settings: GenerateSettings, out: 
     """Sample ``settings.n`` clouds per prompt, write them to ``out``; return a summary."""
     check_prompts(prompts)
     if settings.n < 1 or settings.steps < 1:
-        raise InputError("-n and --steps must be at least 1")
+        raise InputError("-n and --sample-steps must be at least 1")
     check_run_dir(out, "generate", option="--out")
     t0 = time.perf_counter()
     res = prior.sample(prompts, settings.n, settings.guidance, settings.steps, settings.seed,

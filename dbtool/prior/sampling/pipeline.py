@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from dbtool.choices import PRIOR_VERSION
 from dbtool.errors import InputError
 from dbtool.precision import use_bf16
 from dbtool.prior.sampling import text
@@ -32,7 +33,7 @@ from dbtool.prior.sampling.schedulers import (
 )
 
 WEIGHTS_ROOT = Path(__file__).parents[1] / "weights"  # dbtool/prior/weights
-DEFAULT_VERSION = 1  # the shipped prior; every version keeps its folder weights/vN
+DEFAULT_VERSION = PRIOR_VERSION  # the shipped prior; every version keeps its folder weights/vN
 
 
 CONFIG = "config.json"  # in a weights folder: the noise schedules its models were trained with

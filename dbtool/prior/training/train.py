@@ -256,8 +256,8 @@ def initial_state(cfg: TrainConfig, ckpt_path: Path, run_dir: Path) -> TrainStat
         state.gen.set_state(ck["gen"])
         state.start, state.elapsed = ck["step"], ck["elapsed"]
         if cfg.steps < state.start:
-            raise InputError(f"{run_dir} is already at step {state.start}; --steps {cfg.steps} "
-                             "would go back")
+            raise InputError(f"{run_dir} is already at step {state.start}; --train-steps "
+                             f"{cfg.steps} would go back")
     elif cfg.init:
         if not Path(cfg.init).is_file():
             raise MissingFileError(f"the checkpoint to start from does not exist: {cfg.init}")
