@@ -109,6 +109,10 @@ def main() -> None:
     for task, by in counts.items():
         for method, c in by.items():
             print(f"{task:9s} {method:12s} " + ", ".join(f"{k} {v}" for k, v in sorted(c.items())))
+    from dbtool.provenance import provenance
+
+    config = {"folder": str(args.folder), "methods": args.methods}
+    made = provenance(config)  # before this script's own pages and pictures touch the tree
     if args.md:
         from dbtool.atomic import atomic_write_text
         from dbtool.compare.labels import method_name
@@ -130,7 +134,7 @@ def main() -> None:
                   "counts": {t: {m: dict(c) for m, c in by.items()} for t, by in counts.items()},
                   "best": best},
                  args.out, Path(__file__).parent / "results" / f"motion-{name}.json", False,
-                 {"folder": str(args.folder), "methods": args.methods})
+                 config, made)
 
 
 if __name__ == "__main__":
