@@ -10,7 +10,7 @@ method).
 Separately from the FIFO, the buffer remembers the ``keep`` best designs ever seen (``elite``),
 so a run can hand over a design that worked in an early epoch. With ``elite=True`` the training
 set is the top-k of the FIFO and the elite together (an option, off in both presets: measured
-in docs/codesign.md, it did not help).
+in docs/codesign-archive.md, it did not help).
 """
 
 from __future__ import annotations

@@ -28,7 +28,8 @@ def _choice(name: str, value: str, allowed: tuple[str, ...]) -> None:
 
 # Text feedback (docs/method.md §6) guides the denoising loop only at t >= PROMPT_T_MIN: the prompt
 # shapes the coarse body and the optimised embedding (with the physics term) finishes it, so the
-# feedback adds the trait without overwriting the functional body (measured in docs/codesign.md).
+# feedback adds the trait without overwriting the functional body (measured in
+# docs/codesign-diffusion.md).
 PROMPT_T_MIN = 350
 
 @dataclass(frozen=True)

@@ -62,7 +62,8 @@ def train_step(prior, c: torch.Tensor | Callable[[], torch.Tensor], opt: torch.o
 
     With ``baseline`` the objective is ``L(entries) - L(baseline)`` on the same timesteps and
     noise: the loss on the unfiltered recent samples is a control variate that cancels the
-    drift c has on its own samples, leaving the performance filter's signal (docs/codesign.md).
+    drift c has on its own samples, leaving the performance filter's signal
+    (docs/codesign-archive.md).
     """
     if callable(c):
         c = c()
@@ -107,7 +108,7 @@ class Embedding(torch.nn.Module):
 
     ``free``: c itself (384 numbers). ``captions``: ``c = sum_k softmax(w)_k e_k`` over the
     family captions' embeddings, the start condition and the null (zero) embedding, so c stays
-    in the convex hull of conditions the prior was trained on (docs/codesign.md: a free c
+    in the convex hull of conditions the prior was trained on (docs/codesign-archive.md: a free c
     leaves that region within a few Adam steps and the samples degrade). ``mixture``: the same
     atoms, but c is the mixture ``sum_k softmax(w)_k p(x | e_k)``: each design is sampled
     from one atom, drawn with probability ``softmax(w)_k`` (docs/codesign.md: the blended
