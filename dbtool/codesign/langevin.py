@@ -33,8 +33,8 @@ dbtool's defaults depart from the fixed step above (docs/method.md §5, measured
 docs/codesign-diffusion.md): ``g`` is the gradient of the robot that is scored
 (``gradient="scored"``: active sites only, no straight-through band), and with ``search``
 the physics step's length is chosen by the simulator: the design ``x0_hat + a g / rms(g)``
-is simulated for each ``a`` in ``search`` (RMS displacement, prior frame) and x_t moves by ``sqrt(abar_t) a* g / rms(g)``
-for the best ``a*`` (0 when none beats ``x0_hat``)::
+is simulated for each ``a`` in ``search`` (RMS displacement, prior frame) and x_t moves by
+``sqrt(abar_t) a* g / rms(g)`` for the best ``a*`` (0 when none beats ``x0_hat``)::
 
     x_t  <- x_t + eta_t * s + sqrt(abar_t) * a* * g / rms(g) + sigma_t * z
 
