@@ -1,5 +1,5 @@
-"""A maker's checks of a gripper export folder, from its files alone (docs/export.md,
-"Checked as a maker would").
+"""A maker's checks of a gripper export folder, from its files alone
+(docs/export-checks.md).
 
 Reads the part STLs (in their print orientation), ``report.json`` (each part's print pose) and
 ``tendons.json``, turns the parts back into the gripper's frame, and checks with booleans of its
