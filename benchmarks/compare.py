@@ -97,10 +97,10 @@ def grad_cost(tasks: list[str], steps: int, repeats: int, threads: int) -> list[
 
 def compare_args(cells: dict, executor: str, out: Path) -> list[str]:
     """The CLI arguments (typer takes a list option once per value)."""
-    rep = [a for opt in ("tasks", "methods") for v in cells[opt] for a in (f"--{opt}", v)]
+    rep = [a for opt in ("tasks", "methods") for v in cells[opt] for a in (f"--{opt[:-1]}", v)]
     seeds = [str(s) for s in cells.get("seeds", [0])]
     kind, options = EXECUTORS[executor]
-    return ["compare", "--budget", cells.get("budget", "smoke"), *rep, "--seeds", *seeds,
+    return ["compare", "--preset", cells.get("budget", "smoke"), *rep, "--seed", *seeds,
             "--executor", kind, *options, "--out", str(out)]
 
 
