@@ -20,6 +20,7 @@ README_WORDS = 900
 CELL_WORDS = 30
 LIMITATIONS = 6
 PAGE_WORDS = 4000
+TO_SPLIT = {"docs/method.md"}  # over the limit until its sections move to their own pages
 
 
 def words(text: str) -> int:
@@ -57,6 +58,9 @@ def problems(root: Path = ROOT) -> list[str]:
         out.append(f"README.md: {n} known limitations (1 to {LIMITATIONS})")
     if '--8<-- "README.md:status"' not in (root / "docs" / "index.md").read_text():
         out.append("docs/index.md does not include the README's status table")
+    for page, n in pages_over(root):
+        if page not in TO_SPLIT:
+            out.append(f"{page}: {n} words (at most {PAGE_WORDS}; split it by topic)")
     return out
 
 

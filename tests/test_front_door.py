@@ -38,6 +38,7 @@ def test_a_readme_that_narrates_is_refused(tmp_path):
     page with its own table are each reported."""
     (tmp_path / "docs").mkdir()
     (tmp_path / "docs" / "index.md").write_text("| part | state |\n")
+    (tmp_path / "docs" / "long.md").write_text("word " * 4001)
     long_cell = " ".join(["word"] * 31)
     limits = "\n".join(f"{i}. limit" for i in range(1, 8))
     text = (f"# x\n\n## Status\n\n| a | b |\n| --- | --- |\n| sim | {long_cell} |\n\n"
@@ -48,6 +49,7 @@ def test_a_readme_that_narrates_is_refused(tmp_path):
     assert "status cell of 31 words" in found
     assert "7 known limitations" in found
     assert "does not include the README's status table" in found
+    assert "docs/long.md: 4001 words" in found
 
 
 def _commands(text: str) -> list[list[str]]:
