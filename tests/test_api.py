@@ -4,9 +4,11 @@ in the README and docs/python.md call only entry points that exist, with argumen
 from __future__ import annotations
 
 import ast
-import doctest
 import inspect
+import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -18,25 +20,33 @@ import dbtool.choices
 ROOT = Path(__file__).resolve().parents[1]
 
 
-class _Checker(doctest.OutputChecker):
-    """Taichi announces each (re)initialisation on stdout; the examples do not show it."""
+RUN_EXAMPLES = """
+import doctest, sys
+import dbtool, dbtool.api, dbtool.choices
 
-    def check_output(self, want: str, got: str, optionflags: int) -> bool:
+class Checker(doctest.OutputChecker):
+    # Taichi announces each (re)initialisation on stdout; the examples do not show it
+    def check_output(self, want, got, optionflags):
         got = "".join(ln for ln in got.splitlines(True) if not ln.startswith("[Taichi]"))
         return super().check_output(want, got, optionflags)
 
+runner = doctest.DocTestRunner(checker=Checker(), optionflags=doctest.ELLIPSIS)
+for module in (dbtool, dbtool.choices, dbtool.api):
+    tests = doctest.DocTestFinder().find(module)
+    assert sum(len(t.examples) for t in tests) > 0, module.__name__
+    for test in tests:
+        runner.run(test)
+sys.exit(1 if runner.summarize(verbose=False).failed else 0)
+"""
 
-def test_the_docstring_examples_run(tmp_path, monkeypatch):
-    """A design run, an export and a comparison, each as small as the docstring makes it."""
-    monkeypatch.chdir(tmp_path)
-    monkeypatch.setenv("DBTOOL_THREADS", "1")  # the comparison's cells run on one thread too
-    runner = doctest.DocTestRunner(checker=_Checker(), optionflags=doctest.ELLIPSIS)
-    for module in (dbtool, dbtool.choices, dbtool.api):
-        tests = doctest.DocTestFinder().find(module)
-        for test in tests:
-            runner.run(test)
-        assert sum(len(t.examples) for t in tests) > 0, module.__name__
-    assert runner.summarize(verbose=False).failed == 0
+
+def test_the_docstring_examples_run(tmp_path):
+    """A design run, an export and a comparison, each as small as the docstring makes it, in
+    a fresh interpreter (the comparison re-initialises Taichi, as a user's script would)."""
+    env = {**os.environ, "DBTOOL_THREADS": "1"}  # the comparison's cells run on one thread too
+    res = subprocess.run([sys.executable, "-c", RUN_EXAMPLES], cwd=tmp_path, env=env,
+                         capture_output=True, text=True, timeout=1200)
+    assert res.returncode == 0, res.stdout[-4000:] + res.stderr[-2000:]
     assert sorted(p.name for p in tmp_path.iterdir()) == [
         "box.npz", "cmp", "exports-doc", "runs"]
 
